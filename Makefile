@@ -1,0 +1,27 @@
+# objslam: `make demo` sets up and builds a map of the bundled bag; `make test` sets
+# up and runs every test and the linter. Both are quick no-ops for what is already set up.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+RUN := source env.sh &&
+
+.PHONY: help setup demo test lint clean
+
+help:
+	@echo "make demo   set up (if needed) and build the map of bags/office"
+	@echo "make test   set up (if needed), lint, and run the whole test suite"
+	@echo "make setup  only set up .venv and the colcon workspace"
+
+setup:
+	@scripts/setup.sh
+
+demo: setup
+	@$(RUN) scripts/demo.sh
+
+lint: setup
+	@$(RUN) ruff check src tests scripts && ruff format --check src tests scripts
+
+test: lint
+	@$(RUN) python -m pytest
+
+clean:
+	rm -rf build install log .venv

@@ -1,0 +1,69 @@
+"""Planar geometry: angle wrapping and SE(2) poses as (x, y, theta) arrays.
+
+This is the one place where angles are wrapped; everything else calls ``wrap_angle``.
+Poses are named ``a_T_b``: the pose of frame b expressed in frame a, so that
+``compose(a_T_b, b_T_c) == a_T_c``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+def wrap_angle(angle_rad: ArrayLike) -> NDArray[np.float64] | float:
+    """Wrap angles to [-pi, pi). Works on scalars and arrays."""
+    wrapped = (np.asarray(angle_rad, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
+
+
+def rotation(theta_rad: float) -> NDArray[np.float64]:
+    """2x2 rotation matrix."""
+    c, s = np.cos(theta_rad), np.sin(theta_rad)
+    return np.array([[c, -s], [s, c]])
+
+
+def compose(a_T_b: ArrayLike, b_T_c: ArrayLike) -> NDArray[np.float64]:
+    """a_T_c from a_T_b and b_T_c, each (x, y, theta)."""
+    a_T_b = np.asarray(a_T_b, dtype=float)
+    b_T_c = np.asarray(b_T_c, dtype=float)
+    xy = a_T_b[:2] + rotation(a_T_b[2]) @ b_T_c[:2]
+    return np.array([xy[0], xy[1], wrap_angle(a_T_b[2] + b_T_c[2])])
+
+
+def inverse(a_T_b: ArrayLike) -> NDArray[np.float64]:
+    """b_T_a from a_T_b."""
+    a_T_b = np.asarray(a_T_b, dtype=float)
+    xy = -(rotation(a_T_b[2]).T @ a_T_b[:2])
+    return np.array([xy[0], xy[1], wrap_angle(-a_T_b[2])])
+
+
+def between(a_T_b: ArrayLike, a_T_c: ArrayLike) -> NDArray[np.float64]:
+    """b_T_c: the motion from b to c, both given in frame a."""
+    return compose(inverse(a_T_b), a_T_c)
+
+
+def transform_points(a_T_b: ArrayLike, b_points_xy: ArrayLike) -> NDArray[np.float64]:
+    """Map (N, 2) points from frame b into frame a."""
+    a_T_b = np.asarray(a_T_b, dtype=float)
+    pts = np.atleast_2d(np.asarray(b_points_xy, dtype=float))
+    return pts @ rotation(a_T_b[2]).T + a_T_b[:2]
+
+
+def interpolate_pose(a_T_b0: ArrayLike, a_T_b1: ArrayLike, fraction: float) -> NDArray[np.float64]:
+    """Pose a fraction of the way from b0 to b1 (linear in x, y; shortest arc in theta)."""
+    p0 = np.asarray(a_T_b0, dtype=float)
+    p1 = np.asarray(a_T_b1, dtype=float)
+    xy = p0[:2] + fraction * (p1[:2] - p0[:2])
+    theta = p0[2] + fraction * wrap_angle(p1[2] - p0[2])
+    return np.array([xy[0], xy[1], wrap_angle(theta)])
+
+
+def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rotation about z) of a unit quaternion, rad."""
+    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def quaternion_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of a rotation about z."""
+    return (0.0, 0.0, float(np.sin(yaw_rad / 2.0)), float(np.cos(yaw_rad / 2.0)))

@@ -1,0 +1,1 @@
+"""objslam_tools: the ``objslam`` command, the bag simulator, bag I/O and evaluation."""

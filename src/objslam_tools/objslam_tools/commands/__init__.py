@@ -1,0 +1,1 @@
+"""One module per ``objslam`` verb; each exposes ``register(subparsers)``."""
