@@ -1,0 +1,121 @@
+"""Per-class colour gates in HSV, derived from the catalog colours.
+
+A gate accepts a pixel whose hue lies within a half-width of the class hue and whose
+saturation and value exceed floors. Hue and saturation do not change when white light
+gets brighter or dimmer, which is what makes the gates hold across lit scenes. Gates are
+derived from the catalog (hue of the nominal colour, half-width limited by the nearest
+other class so that gates never overlap) and can be overridden per class.
+"""
+
+from __future__ import annotations
+
+import colorsys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from objslam_mapper.catalog import Catalog
+
+    from objslam_detector.config import ColorConfig
+
+OVERRIDE_KEYS = ("hue_deg", "hue_halfwidth_deg", "min_saturation", "min_value")
+# OpenCV's 8-bit "full" HSV stores hue in 0..255 for 0..360 deg.
+_HUE_UNITS_PER_DEG = 256.0 / 360.0
+
+
+@dataclass(frozen=True)
+class ColorGate:
+    """Accepted HSV region of one class; saturation and value in 0..1."""
+
+    label: str
+    hue_deg: float
+    hue_halfwidth_deg: float
+    min_saturation: float
+    min_value: float
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.hue_halfwidth_deg <= 180.0:
+            raise ValueError(f"class {self.label!r}: hue_halfwidth_deg must be in (0, 180], got {self.hue_halfwidth_deg}")
+        for name in ("min_saturation", "min_value"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"class {self.label!r}: {name} must be in [0, 1], got {value}")
+
+    def hue_ranges(self) -> list[tuple[int, int]]:
+        """Inclusive ranges of 8-bit full-range hue (0..255), split where the gate wraps past 0."""
+        if self.hue_halfwidth_deg >= 180.0:
+            return [(0, 255)]
+        lo = int(np.ceil((self.hue_deg - self.hue_halfwidth_deg) * _HUE_UNITS_PER_DEG))
+        hi = int(np.floor((self.hue_deg + self.hue_halfwidth_deg) * _HUE_UNITS_PER_DEG))
+        lo, hi = lo % 256, hi % 256
+        return [(lo, hi)] if lo <= hi else [(0, hi), (lo, 255)]
+
+    def mask(self, hsv_full: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """255 where an (H, W, 3) ``COLOR_*2HSV_FULL`` image passes the gate, else 0."""
+        s_lo = int(np.ceil(self.min_saturation * 255.0))
+        v_lo = int(np.ceil(self.min_value * 255.0))
+        result = None
+        for h_lo, h_hi in self.hue_ranges():
+            part = cv2.inRange(hsv_full, (h_lo, s_lo, v_lo), (h_hi, 255, 255))
+            result = part if result is None else cv2.bitwise_or(result, part)
+        return result
+
+
+def hue_saturation_value(color_rgb: Sequence[int]) -> tuple[float, float, float]:
+    """Hue in degrees [0, 360), saturation and value in 0..1 of an 8-bit RGB colour."""
+    h, s, v = colorsys.rgb_to_hsv(*(c / 255.0 for c in color_rgb))
+    return 360.0 * h, s, v
+
+
+def hue_distance_deg(a_deg: float, b_deg: float) -> float:
+    d = abs(a_deg - b_deg) % 360.0
+    return min(d, 360.0 - d)
+
+
+def parse_class_overrides(entries: Iterable[str]) -> dict[str, dict[str, float]]:
+    """``['red: hue_halfwidth_deg=12, min_value=0.2']`` -> ``{'red': {...}}``; ValueError names the bad entry."""
+    overrides: dict[str, dict[str, float]] = {}
+    for entry in entries:
+        label, sep, rest = str(entry).partition(":")
+        label = label.strip()
+        if not sep or not label:
+            raise ValueError(f"class override {entry!r}: expected 'LABEL: key=value, ...'")
+        values = overrides.setdefault(label, {})
+        for item in filter(None, (part.strip() for part in rest.split(","))):
+            key, eq, text = item.partition("=")
+            key = key.strip()
+            if not eq or key not in OVERRIDE_KEYS:
+                raise ValueError(f"class override {entry!r}: unknown item {item!r} (keys: {', '.join(OVERRIDE_KEYS)})")
+            try:
+                values[key] = float(text)
+            except ValueError as exc:
+                raise ValueError(f"class override {entry!r}: {key} must be a number, got {text.strip()!r}") from exc
+    return overrides
+
+
+def derive_gates(catalog: Catalog, config: ColorConfig) -> tuple[ColorGate, ...]:
+    """One gate per catalog class, from its nominal colour, then the configured overrides."""
+    hsv = {cls.label: hue_saturation_value(cls.color_rgb) for cls in catalog}
+    gates = {}
+    for label, (hue, sat, val) in hsv.items():
+        others = [hue_distance_deg(hue, h) for other, (h, s, _v) in hsv.items() if other != label and s > 0]
+        halfwidth = config.hue_halfwidth_max_deg
+        if others:
+            halfwidth = min(halfwidth, config.hue_neighbor_fraction * min(others))
+        gates[label] = ColorGate(
+            label=label,
+            hue_deg=hue,
+            hue_halfwidth_deg=max(halfwidth, 1.0),
+            min_saturation=max(config.min_saturation, config.min_saturation_fraction * sat),
+            min_value=config.min_value,
+        )
+    for label, values in parse_class_overrides(config.class_overrides).items():
+        if label not in gates:
+            raise ValueError(f"class override for {label!r}: no such class in the catalog ({', '.join(gates)})")
+        gates[label] = replace(gates[label], **values)
+    return tuple(gates.values())

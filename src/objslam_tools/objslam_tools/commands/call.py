@@ -1,0 +1,57 @@
+"""``objslam call build-map``: call the mapper's BuildMap service and print the response."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import yaml
+
+from objslam_tools.ros_util import message_to_plain, ros_node
+
+SERVICE = "/objslam/build_map"
+NO_SERVICE_EXIT = 1
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("call", help="call an objslam service (build-map)")
+    calls = parser.add_subparsers(dest="service", metavar="SERVICE")
+    calls.required = True
+    build = calls.add_parser("build-map", help=f"build the map from what the mapper buffered ({SERVICE})")
+    build.add_argument("--samples", type=int, default=0, help="MCMC samples incl. burn-in (0: mapper's default)")
+    build.add_argument("--burn-in", type=int, default=0, help="samples discarded first (0: mapper's default)")
+    build.add_argument("--seed", type=int, default=0, help="random seed (0: mapper's default)")
+    build.add_argument("--wait", type=float, default=10.0, metavar="S", help="how long to wait for the service")
+    build.add_argument("--timeout", type=float, default=None, metavar="S", help="give up on the answer after S s")
+    build.set_defaults(func=run_build_map)
+
+
+def run_build_map(args: argparse.Namespace) -> int:
+    import rclpy
+
+    from objslam_msgs.srv import BuildMap
+
+    for name, value in (("--samples", args.samples), ("--burn-in", args.burn_in), ("--seed", args.seed)):
+        if value < 0:
+            print(f"objslam call: error: {name} must be >= 0", file=sys.stderr)
+            return 2
+    with ros_node("objslam_call") as node:
+        client = node.create_client(BuildMap, SERVICE)
+        if not client.wait_for_service(timeout_sec=args.wait):
+            print(
+                f"objslam call: no service answered at {SERVICE} within {args.wait:g} s (is the mapper running?)",
+                file=sys.stderr,
+            )
+            return NO_SERVICE_EXIT
+        request = BuildMap.Request(samples=args.samples, burn_in=args.burn_in, seed=args.seed)
+        started = time.monotonic()
+        future = client.call_async(request)
+        while rclpy.ok() and not future.done():
+            if args.timeout is not None and time.monotonic() - started > args.timeout:
+                print(f"objslam call: no answer within {args.timeout:g} s", file=sys.stderr)
+                return NO_SERVICE_EXIT
+            rclpy.spin_once(node, timeout_sec=0.1)
+        response = future.result()
+    sys.stdout.write(yaml.safe_dump(message_to_plain(response), sort_keys=False))
+    return 0 if response.success else 1
