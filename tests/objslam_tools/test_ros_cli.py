@@ -41,7 +41,6 @@ def test_late_subscriber_receives_latched_message(processes):
     assert yaml.safe_load(first) == {"data": "hello late subscriber"}
 
 
-@pytest.mark.skipif(not (BAGS / "small").is_dir(), reason="bags/small not rendered")
 def test_play_small_bag_reaches_echo(processes):
     player = processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "0.5", "--loop"))
     result = processes.run(objslam_cmd("echo", "/odom", "--once", "--timeout", "30"), timeout=60)

@@ -19,9 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from objslam_mapper.catalog import Catalog
-
     from objslam_detector.config import ColorConfig
+    from objslam_mapper.catalog import Catalog
 
 OVERRIDE_KEYS = ("hue_deg", "hue_halfwidth_deg", "min_saturation", "min_value")
 # OpenCV's 8-bit "full" HSV stores hue in 0..255 for 0..360 deg.
@@ -40,7 +39,9 @@ class ColorGate:
 
     def __post_init__(self) -> None:
         if not 0.0 < self.hue_halfwidth_deg <= 180.0:
-            raise ValueError(f"class {self.label!r}: hue_halfwidth_deg must be in (0, 180], got {self.hue_halfwidth_deg}")
+            raise ValueError(
+                f"class {self.label!r}: hue_halfwidth_deg must be in (0, 180], got {self.hue_halfwidth_deg}"
+            )
         for name in ("min_saturation", "min_value"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
@@ -55,15 +56,30 @@ class ColorGate:
         lo, hi = lo % 256, hi % 256
         return [(lo, hi)] if lo <= hi else [(0, hi), (lo, 255)]
 
-    def mask(self, hsv_full: NDArray[np.uint8]) -> NDArray[np.uint8]:
-        """255 where an (H, W, 3) ``COLOR_*2HSV_FULL`` image passes the gate, else 0."""
-        s_lo = int(np.ceil(self.min_saturation * 255.0))
-        v_lo = int(np.ceil(self.min_value * 255.0))
+    def mask(
+        self, hue: NDArray[np.uint8], saturation: NDArray[np.uint8], value: NDArray[np.uint8]
+    ) -> NDArray[np.uint8]:
+        """255 where the planes of a ``COLOR_*2HSV_FULL`` image pass the gate, else 0."""
         result = None
         for h_lo, h_hi in self.hue_ranges():
-            part = cv2.inRange(hsv_full, (h_lo, s_lo, v_lo), (h_hi, 255, 255))
+            part = cv2.inRange(hue, h_lo, h_hi)
             result = part if result is None else cv2.bitwise_or(result, part)
+        for plane, floor in ((saturation, self.min_saturation), (value, self.min_value)):
+            level = int(np.ceil(floor * 255.0))
+            if level > 0:
+                result = cv2.bitwise_and(result, cv2.threshold(plane, level - 1, 255, cv2.THRESH_BINARY)[1])
         return result
+
+
+def classify(hsv_full: NDArray[np.uint8], gates: Sequence[ColorGate]) -> NDArray[np.uint8]:
+    """Class index per pixel: 0 for none, k + 1 for ``gates[k]`` (a later gate wins where overrides overlap)."""
+    hue, saturation, value = cv2.split(hsv_full)
+    index = np.zeros_like(hue)
+    for k, gate in enumerate(gates):
+        mask = gate.mask(hue, saturation, value)
+        cv2.subtract(index, 255, dst=index, mask=mask)  # saturates to 0: overwrite, not add
+        cv2.add(index, k + 1, dst=index, mask=mask)
+    return index
 
 
 def hue_saturation_value(color_rgb: Sequence[int]) -> tuple[float, float, float]:
@@ -102,7 +118,7 @@ def derive_gates(catalog: Catalog, config: ColorConfig) -> tuple[ColorGate, ...]
     """One gate per catalog class, from its nominal colour, then the configured overrides."""
     hsv = {cls.label: hue_saturation_value(cls.color_rgb) for cls in catalog}
     gates = {}
-    for label, (hue, sat, val) in hsv.items():
+    for label, (hue, sat, _val) in hsv.items():
         others = [hue_distance_deg(hue, h) for other, (h, s, _v) in hsv.items() if other != label and s > 0]
         halfwidth = config.hue_halfwidth_max_deg
         if others:

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from objslam_mapper.config import setting
-
 from objslam_detector.colors import parse_class_overrides
+from objslam_mapper.config import setting
 
 
 @dataclass(frozen=True)
@@ -64,9 +63,6 @@ class BlobConfig:
     """Cleaning the colour masks and gating the blobs."""
 
     opening_kernel_px: int = setting(3, "square opening kernel against speckle, panorama px (1 = off)", minimum=1)
-    closing_height_px: int = setting(
-        5, "vertical closing kernel, panorama px: joins a blob across thin horizontal gaps only", minimum=1
-    )
     min_pixel_count: int = setting(40, "fewest panorama pixels of a blob", minimum=1)
     min_angular_width_deg: float = setting(1.0, "narrowest blob, deg of azimuth", minimum=0.0)
     min_angular_height_deg: float = setting(1.0, "lowest blob, deg of elevation", minimum=0.0)
@@ -91,6 +87,7 @@ class DetectorConfig:
     use_compressed: bool = setting(False, "subscribe to IMAGE_TOPIC/compressed (sensor_msgs/CompressedImage) instead")
     camera_info_topic: str = setting("/camera/camera_info", "calibration topic (sensor_msgs/CameraInfo, 'unified')")
     publish_debug_image: bool = setting(False, "publish the image with the slices drawn on it")
-    panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping")
-    color: ColorConfig = setting(ColorConfig(), "colour gates")
-    blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates")
+    # Frozen nested defaults are immutable, so sharing one instance is safe.
+    panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping")  # noqa: RUF009
+    color: ColorConfig = setting(ColorConfig(), "colour gates")  # noqa: RUF009
+    blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates")  # noqa: RUF009

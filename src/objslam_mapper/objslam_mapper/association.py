@@ -51,7 +51,10 @@ class Association:
     @classmethod
     def of(cls, assignment: Iterable[int]) -> Association:
         """The state of any labelling (object numbers need not be canonical)."""
-        return cls(canonical(list(assignment)))
+        state = object.__new__(cls)
+        # Canonical by construction: skip __post_init__'s check (the sampler's hot path).
+        object.__setattr__(state, "assignment", canonical(list(assignment)))
+        return state
 
     @classmethod
     def from_groups(cls, n_tracklets: int, groups: Iterable[Iterable[int]]) -> Association:

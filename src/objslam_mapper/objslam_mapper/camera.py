@@ -84,7 +84,9 @@ class UnifiedCamera:
         return self.fx * np.cos(e) / (self.xi - np.sin(e))
 
     @classmethod
-    def from_camera_info(cls, width: int, height: int, distortion_model: str, d: ArrayLike, k: ArrayLike) -> "UnifiedCamera":
+    def from_camera_info(
+        cls, width: int, height: int, distortion_model: str, d: ArrayLike, k: ArrayLike
+    ) -> "UnifiedCamera":
         """Build from the fields of sensor_msgs/CameraInfo (passed as plain values)."""
         if distortion_model != "unified":
             raise CameraModelError(f"distortion_model must be 'unified', got {distortion_model!r}")
@@ -92,7 +94,15 @@ class UnifiedCamera:
         k = list(k)
         if len(d) < 1 or len(k) != 9:
             raise CameraModelError(f"expected d=[xi] and 9 values of k, got d={d}, k of length {len(k)}")
-        return cls(width_px=int(width), height_px=int(height), xi=float(d[0]), fx=float(k[0]), fy=float(k[4]), cx=float(k[2]), cy=float(k[5]))
+        return cls(
+            width_px=int(width),
+            height_px=int(height),
+            xi=float(d[0]),
+            fx=float(k[0]),
+            fy=float(k[4]),
+            cx=float(k[2]),
+            cy=float(k[5]),
+        )
 
 
 DEFAULT_CAMERA = UnifiedCamera(width_px=640, height_px=640, xi=0.9, fx=170.0, fy=170.0, cx=320.0, cy=320.0)

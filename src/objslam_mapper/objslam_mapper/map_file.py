@@ -111,7 +111,14 @@ def map_to_dict(built: BuiltMap) -> dict[str, Any]:
         "objects": [_object_to_dict(o) for o in built.objects],
         "rejected": [_object_to_dict(o) for o in built.rejected],
         "trajectory": [
-            {"stamp": p.stamp_ns * 1e-9, "x": float(p.x_m), "y": float(p.y_m), "theta": float(p.theta_rad)}
+            # float seconds per the contract; stamp_ns keeps the exact stamp for a lossless read back
+            {
+                "stamp": p.stamp_ns * 1e-9,
+                "x": float(p.x_m),
+                "y": float(p.y_m),
+                "theta": float(p.theta_rad),
+                "stamp_ns": int(p.stamp_ns),
+            }
             for p in built.trajectory
         ],
         "diagnostics": _plain(built.diagnostics),
@@ -124,7 +131,10 @@ def map_from_dict(data: dict[str, Any]) -> BuiltMap:
         rejected=tuple(_object_from_dict(o) for o in data.get("rejected") or []),
         trajectory=tuple(
             TrajectoryPose(
-                stamp_ns=round(float(p["stamp"]) * 1e9), x_m=float(p["x"]), y_m=float(p["y"]), theta_rad=float(p["theta"])
+                stamp_ns=int(p["stamp_ns"]) if "stamp_ns" in p else round(float(p["stamp"]) * 1e9),
+                x_m=float(p["x"]),
+                y_m=float(p["y"]),
+                theta_rad=float(p["theta"]),
             )
             for p in data.get("trajectory") or []
         ),

@@ -1,0 +1,129 @@
+"""Colour-blob detection on the unwarped panorama: image + calibration -> slices.
+
+CMVision style: per-class colour gates on the panorama, morphological cleaning,
+connected components, size and shape gates; each surviving blob becomes a
+DetectedSlice measured on its silhouette (``measure``).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from objslam_detector.blobs import Blob, Segmenter, clean, strip
+from objslam_detector.colors import ColorGate, classify, derive_gates
+from objslam_detector.config import DetectorConfig
+from objslam_detector.images import as_color_image, check_size
+from objslam_detector.measure import measure
+from objslam_detector.panorama import Panorama
+from objslam_detector.slices import DetectedSlice
+from objslam_mapper.camera import UnifiedCamera
+from objslam_mapper.catalog import Catalog, load_catalog
+from objslam_mapper.config import ConfigError
+
+logger = logging.getLogger(__name__)
+
+_PANORAMA_CACHE_SIZE = 4
+# Another class's blob this close beside a blob means one hides part of the other.
+_TOUCH_PX = 2
+# Brightest level of the black border outside the image circle.
+_BLACK = 8
+
+
+class Detector:
+    """Detects catalog classes in omnidirectional images.
+
+    Holds no per-image state, only the remap tables of the calibrations seen (built once
+    per calibration), so one instance serves a whole image stream.
+    """
+
+    def __init__(self, config: DetectorConfig | None = None, catalog: Catalog | None = None) -> None:
+        self.config = config or DetectorConfig()
+        self.catalog = catalog if catalog is not None else load_catalog(self.config.catalog_file or None)
+        try:
+            self.gates: tuple[ColorGate, ...] = derive_gates(self.catalog, self.config.color)
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from exc
+        self._panoramas: OrderedDict[UnifiedCamera, tuple[Panorama, Segmenter]] = OrderedDict()
+
+    def panorama(self, camera: UnifiedCamera) -> Panorama:
+        """Remap tables of a calibration, built on first use."""
+        return self._for_camera(camera)[0]
+
+    def detect(self, image: NDArray, camera: UnifiedCamera, encoding: str = "rgb8") -> list[DetectedSlice]:
+        """Slices of one image, in no particular order.
+
+        ``image`` is (H, W, C) or (H, W) uint8 in ``encoding`` (rgb8, bgr8, rgba8, bgra8,
+        mono8) and must match the calibration's size; DetectorInputError otherwise.
+        """
+        pano, segmenter = self._for_camera(camera)
+        rgb = self.unwarp(image, camera, encoding)
+        class_index = self.class_index(rgb)
+        blobs = segmenter.blobs(class_index)
+        slices = []
+        for blob in blobs:
+            truncated = blob.cut or _beside_other_class(blob, class_index) or _at_view_edge(blob, pano, rgb)
+            label = self.gates[blob.class_index - 1].label
+            slices.append(measure(blob, label, rgb, pano, truncated, self.config.blobs.truncated_confidence))
+        return slices
+
+    def unwarp(self, image: NDArray, camera: UnifiedCamera, encoding: str = "rgb8") -> NDArray[np.uint8]:
+        """The checked image as an RGB panorama (rows: elevation, columns: azimuth)."""
+        color = as_color_image(image, encoding)
+        check_size(color.pixels, camera)
+        pano = self.panorama(camera).unwarp(color.pixels)
+        return pano if color.order == "rgb" else cv2.cvtColor(pano, cv2.COLOR_BGR2RGB)
+
+    def class_index(self, rgb_panorama: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """Cleaned class index of an RGB panorama: 0 none, k + 1 for ``self.gates[k]``."""
+        index = classify(cv2.cvtColor(rgb_panorama, cv2.COLOR_RGB2HSV_FULL), self.gates)
+        return clean(index, self.config.blobs.opening_kernel_px)
+
+    def _for_camera(self, camera: UnifiedCamera) -> tuple[Panorama, Segmenter]:
+        entry = self._panoramas.get(camera)
+        if entry is None:
+            pano = Panorama.build(camera, self.config.panorama)
+            logger.debug("panorama %dx%d px for %s", pano.cols, pano.rows, camera)
+            entry = (pano, Segmenter(self.config.blobs, pano.azimuth_step_rad, pano.elevation_step_rad))
+            self._panoramas[camera] = entry
+            while len(self._panoramas) > _PANORAMA_CACHE_SIZE:
+                self._panoramas.popitem(last=False)
+        else:
+            self._panoramas.move_to_end(camera)
+        return entry
+
+
+def _beside_other_class(blob: Blob, class_index: NDArray[np.uint8]) -> bool:
+    """Another class's pixels right left or right of the blob: one object partly hides the other."""
+    rows = slice(max(blob.row0 - _TOUCH_PX, 0), blob.row0 + blob.rows + _TOUCH_PX)
+    sides = np.concatenate(
+        [
+            strip(class_index, rows, blob.col0 - _TOUCH_PX, blob.col0),
+            strip(class_index, rows, blob.col0 + blob.cols, blob.col0 + blob.cols + _TOUCH_PX),
+        ],
+        axis=1,
+    )
+    return bool(np.any((sides != 0) & (sides != blob.class_index)))
+
+
+def _at_view_edge(blob: Blob, pano: Panorama, rgb_panorama: NDArray[np.uint8]) -> bool:
+    """The blob reaches the panorama's top or bottom, or the part outside the image or its dark border.
+
+    Mirror cameras (and renderers) leave the image black outside a circle that may lie
+    inside the image rectangle, so black right above or below a blob also means the
+    view cut it.
+    """
+    if blob.row0 == 0 or blob.row0 + blob.rows >= pano.rows:
+        return True
+    end = blob.row0 + blob.rows
+    cols = (blob.col0, blob.col0 + blob.cols)
+    for row in (blob.row0 - 1, end):
+        if not strip(pano.inside, slice(row, row + 1), *cols).all():
+            return True
+        if np.any(strip(rgb_panorama, slice(row, row + 1), *cols).max(axis=-1) <= _BLACK):
+            return True
+    return False

@@ -1,0 +1,158 @@
+"""The ``detector`` node: images (raw or compressed) + camera info -> ``/objslam/slices``.
+
+A thin wrapper over :class:`objslam_detector.detector.Detector`. A frame that cannot be
+used (unsupported encoding, size not matching the calibration, corrupt compressed data,
+no camera info yet) is skipped with a rate-limited warning saying why, and counted.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from objslam_detector.config import DetectorConfig
+from objslam_detector.detector import Detector
+from objslam_detector.errors import DetectorInputError
+from objslam_detector.images import decode_compressed, image_from_buffer
+from objslam_detector.slices import DetectedSlice
+from objslam_mapper.camera import CameraModelError, UnifiedCamera
+from objslam_mapper.catalog import load_catalog
+from objslam_mapper.config import ConfigError
+from objslam_mapper.ros.params import declare_config
+from objslam_msgs.msg import Slice, SliceArray
+
+SLICES_TOPIC = "/objslam/slices"
+DEBUG_IMAGE_TOPIC = "/objslam/detector/debug_image"
+WARN_PERIOD_S = 5.0
+
+
+def slice_to_msg(detected: DetectedSlice) -> Slice:
+    return Slice(
+        label=detected.label,
+        confidence=float(detected.confidence),
+        bearing=float(detected.bearing_rad),
+        angular_width=float(detected.angular_width_rad),
+        elevation_bottom=float(detected.elevation_bottom_rad),
+        elevation_top=float(detected.elevation_top_rad),
+        radius_inner_px=float(detected.radius_inner_px),
+        radius_outer_px=float(detected.radius_outer_px),
+        angle_start_rad=float(detected.angle_start_rad),
+        angle_end_rad=float(detected.angle_end_rad),
+        pixel_count=int(detected.pixel_count),
+    )
+
+
+class DetectorNode(Node):
+    def __init__(self) -> None:
+        super().__init__("detector")
+        self.config = declare_config(self, DetectorConfig)
+        catalog = load_catalog(self.config.catalog_file or None)
+        self.detector = Detector(self.config, catalog)
+        self.camera: UnifiedCamera | None = None
+        self.skipped: Counter[str] = Counter()
+        self.processed = 0
+
+        self.slices_pub = self.create_publisher(SliceArray, SLICES_TOPIC, QoSProfile(depth=100))
+        self.debug_pub = (
+            self.create_publisher(Image, DEBUG_IMAGE_TOPIC, qos_profile_sensor_data)
+            if self.config.publish_debug_image
+            else None
+        )
+        self.create_subscription(
+            CameraInfo, self.config.camera_info_topic, self.on_camera_info, qos_profile_sensor_data
+        )
+        if self.config.use_compressed:
+            topic = self.config.image_topic.rstrip("/") + "/compressed"
+            self.create_subscription(CompressedImage, topic, self.on_compressed, qos_profile_sensor_data)
+        else:
+            topic = self.config.image_topic
+            self.create_subscription(Image, topic, self.on_raw, qos_profile_sensor_data)
+        self.get_logger().info(
+            f"detecting {', '.join(catalog.labels)} on {topic}; slices on {SLICES_TOPIC}"
+            + (f", debug image on {DEBUG_IMAGE_TOPIC}" if self.debug_pub else "")
+        )
+
+    def on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = UnifiedCamera.from_camera_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+        except CameraModelError as exc:
+            self.get_logger().warn(f"ignoring camera info: {exc}", throttle_duration_sec=WARN_PERIOD_S)
+            return
+        self.camera = camera
+
+    def on_raw(self, msg: Image) -> None:
+        self._process(
+            msg.header,
+            lambda: (image_from_buffer(msg.data, msg.width, msg.height, msg.encoding, msg.step), msg.encoding),
+        )
+
+    def on_compressed(self, msg: CompressedImage) -> None:
+        self._process(msg.header, lambda: decode_compressed(msg.data, msg.format))
+
+    def _skip(self, reason: str, detail: str) -> None:
+        self.skipped[reason] += 1
+        total = sum(self.skipped.values())
+        self.get_logger().warn(f"skipped a frame ({total} so far): {detail}", throttle_duration_sec=WARN_PERIOD_S)
+
+    def _process(self, header, decode) -> None:
+        if self.camera is None:
+            self.skipped["no camera info"] += 1
+            self.get_logger().warn(
+                f"waiting for camera info on {self.config.camera_info_topic}; skipping images until it arrives",
+                once=True,
+            )
+            return
+        try:
+            image, encoding = decode()
+            slices = self.detector.detect(image, self.camera, encoding)
+        except DetectorInputError as exc:
+            self._skip("bad input", str(exc))
+            return
+        self.processed += 1
+        self.slices_pub.publish(SliceArray(header=header, slices=[slice_to_msg(s) for s in slices]))
+        if self.debug_pub is not None:
+            self._publish_debug(header, image, encoding, slices)
+
+    def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[DetectedSlice]) -> None:
+        from objslam_detector.images import as_color_image
+        from objslam_detector.overlay import draw_slices
+
+        color = as_color_image(image, encoding)
+        rgb = color.pixels if color.order == "rgb" else color.pixels[..., ::-1]
+        drawn = np.ascontiguousarray(draw_slices(rgb, slices, self.camera))
+        msg = Image(
+            header=header, height=drawn.shape[0], width=drawn.shape[1], encoding="rgb8", step=drawn.shape[1] * 3
+        )
+        msg.data = drawn.tobytes()
+        self.debug_pub.publish(msg)
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = DetectorNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ConfigError as exc:
+        print(f"detector: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            if node.skipped:
+                node.get_logger().info(f"processed {node.processed} frames, skipped {dict(node.skipped)}")
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""Settings of the factor-graph model and its solver (the mapper's ``odometry.*``,
+``slice_noise.*``, ``solver.*`` and ``camera_mount.*`` parameters).
+
+Defaults live in ``config/mapper.yaml`` under ``mapper: ros__parameters:``; the mapper's
+full config dataclass holds these sections beside its own (e.g. ``sampler.*``).
+:func:`load_graph_config` reads just these sections from such a file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass
+
+from objslam_mapper.camera import CameraMount
+from objslam_mapper.config import from_mapping, read_ros_parameters, setting
+
+
+@dataclass(frozen=True)
+class CameraMountConfig:
+    """Where the camera sits on the robot (base_link frame)."""
+
+    height_m: float = setting(0.5, "camera height above the floor (m)", minimum=0.0)
+    offset_x_m: float = setting(0.0, "camera position ahead of the rotation axis (m)")
+    offset_y_m: float = setting(0.0, "camera position left of the rotation axis (m)")
+    yaw_rad: float = setting(0.0, "camera forward axis relative to the robot's (rad, counter-clockwise)")
+
+    def to_mount(self) -> CameraMount:
+        return CameraMount(
+            height_m=self.height_m, offset_x_m=self.offset_x_m, offset_y_m=self.offset_y_m, yaw_rad=self.yaw_rad
+        )
+
+
+@dataclass(frozen=True)
+class OdometryNoiseConfig:
+    """Noise of the odometry factor between consecutive image poses.
+
+    The odometry error is a random walk: the variance of an increment grows linearly with
+    the path length and with the absolute angle turned over it, so it does not depend on
+    how often images were taken. Values are standard deviations after 1 m of travel or
+    1 rad of turn; the minimum keeps standing still well-conditioned.
+    """
+
+    xy_stddev_per_sqrt_m: float = setting(
+        0.05, "translation stddev (m) accumulated over 1 m of travel (variance grows with distance)", minimum=0.0
+    )
+    xy_stddev_per_sqrt_rad: float = setting(
+        0.02, "translation stddev (m) accumulated over 1 rad of turn", minimum=0.0
+    )
+    theta_stddev_per_sqrt_m: float = setting(
+        0.03, "heading stddev (rad) accumulated over 1 m of travel", minimum=0.0
+    )
+    theta_stddev_per_sqrt_rad: float = setting(
+        0.05, "heading stddev (rad) accumulated over 1 rad of turn", minimum=0.0
+    )
+    min_xy_stddev_m: float = setting(0.002, "smallest translation stddev of one increment (m)", minimum=1e-9)
+    min_theta_stddev_rad: float = setting(0.002, "smallest heading stddev of one increment (rad)", minimum=1e-9)
+    first_pose_stddev_m: float = setting(
+        0.001, "prior stddev of the first pose's position (fixes the map frame to odom)", minimum=1e-9
+    )
+    first_pose_stddev_rad: float = setting(0.001, "prior stddev of the first pose's heading (rad)", minimum=1e-9)
+
+
+@dataclass(frozen=True)
+class SliceNoiseConfig:
+    """Gaussian noise of a slice measurement (rad, camera frame).
+
+    Defaults suit a colour-blob detector on the bundled 640x640 image, where one pixel
+    near the horizon spans about 0.3 deg: the bearing averages two blob edges, the width
+    and the elevations each depend on one or two edges and on the blob's shading.
+    """
+
+    bearing_stddev_rad: float = setting(0.006, "bearing (slice centre azimuth) stddev (rad)", minimum=1e-9)
+    angular_width_stddev_rad: float = setting(0.012, "angular width stddev (rad)", minimum=1e-9)
+    elevation_bottom_stddev_rad: float = setting(0.010, "lower edge elevation stddev (rad)", minimum=1e-9)
+    elevation_top_stddev_rad: float = setting(0.010, "upper edge elevation stddev (rad)", minimum=1e-9)
+    raised_elevation_bottom_stddev_rad: float = setting(
+        0.15,
+        "lower edge elevation stddev (rad) for classes standing above the camera on a support, "
+        "whose top hides the object's lowest part (the measured edge is then the support's rim)",
+        minimum=1e-9,
+    )
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Gauss-Newton / Levenberg-Marquardt loop of the known-association solve."""
+
+    max_iterations: int = setting(50, "most linearizations per solve", minimum=1)
+    absolute_tolerance: float = setting(
+        1e-4, "converged when the cost (half chi-square) drops by less than this", minimum=0.0
+    )
+    relative_tolerance: float = setting(0.0, "... plus this fraction of the cost", minimum=0.0)
+    initial_lambda: float = setting(
+        1e-4, "Levenberg-Marquardt damping (relative to the diagonal) after a failed Gauss-Newton step", minimum=1e-12
+    )
+    max_lambda: float = setting(1e8, "give up when the damping grows beyond this", minimum=1.0)
+
+
+@dataclass(frozen=True)
+class GraphConfig:
+    """Everything the factor graph needs besides the catalog."""
+
+    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")
+    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")
+    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")
+    solver: SolverConfig = setting(SolverConfig(), "known-association solver")
+
+
+GRAPH_SECTIONS = tuple(f.name for f in dataclasses.fields(GraphConfig))
+
+
+def load_graph_config(path: str | os.PathLike[str] | None, node_name: str = "mapper") -> GraphConfig:
+    """The graph sections of a node's parameter file; its other sections are left to their owners."""
+    if path is None:
+        return GraphConfig()
+    params = read_ros_parameters(path, node_name)
+    return from_mapping(GraphConfig, {k: v for k, v in params.items() if k in GRAPH_SECTIONS})

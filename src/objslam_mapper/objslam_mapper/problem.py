@@ -1,0 +1,207 @@
+"""The fixed part of the factor graph: poses, odometry factors, measurements, class priors.
+
+:func:`build_problem` turns odometry samples and per-image slices into an immutable
+:class:`GraphProblem`, built once per map and shared by every solve of the association
+sampler (:func:`objslam_mapper.solver.solve`). It holds
+
+- one robot pose per image inside the odometry span (sorted by stamp), initialized from
+  interpolated odometry, with odometry factors between consecutive poses and a tight
+  prior on the first pose (which fixes the map frame to ``odom``);
+- every slice of those images under a **global measurement index** ``m`` (image order,
+  then slice order): ``measurements[m]`` = (bearing, angular width, elevation bottom,
+  elevation top), its noise, the pose it was seen from, its class; ``measurement_image``
+  and ``measurement_slot`` lead back to the input ``images[i].slices[k]``;
+- the class priors (paper eqs. 7-8) as per-class means and standard deviations of the
+  object vector ``(x, y, z_base, diameter, height)``: ``x, y`` weak around the first
+  pose (``xy_stddev_m``), ``z_base`` and the size from the catalog;
+- the log-normalizers ``-0.5 log|2 pi Sigma|`` of every Gaussian factor, for the evidence.
+
+Slices whose class is not in the catalog, and images outside the odometry span, are left
+out and counted (``rejected_slice_count``, ``rejected_image_count``).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from objslam_mapper.camera import CameraMount
+from objslam_mapper.catalog import Catalog, ObjectClass
+from objslam_mapper.graph_config import GraphConfig, SliceNoiseConfig, SolverConfig
+from objslam_mapper.records import ImageSlices, OdometrySample
+from objslam_mapper.slice_model import ELEVATION_BOTTOM
+from objslam_mapper.trajectory import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
+
+logger = logging.getLogger(__name__)
+
+OBJECT_DIM = 5  # x, y, z_base, diameter, height
+POSE_DIM = 3
+LOG_2PI = float(np.log(2.0 * np.pi))
+
+
+class GraphError(ValueError):
+    """Inputs that do not make a factor graph (bad groups, no usable poses)."""
+
+
+def _readonly(array: NDArray) -> NDArray:
+    array = np.ascontiguousarray(array)
+    array.flags.writeable = False
+    return array
+
+
+def gaussian_log_normalizer(stddev: NDArray[np.float64]) -> NDArray[np.float64]:
+    """-0.5 log|2 pi Sigma| of diagonal Gaussians, summed over the last axis."""
+    return -0.5 * np.sum(LOG_2PI + 2.0 * np.log(stddev), axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class GraphProblem:
+    """Immutable inputs of every solve (arrays are read-only). See the module docstring."""
+
+    mount: CameraMount
+    solver: SolverConfig
+    labels: tuple[str, ...]  # class labels; measurement_label and priors index into it
+    # Poses (N)
+    stamps_ns: NDArray[np.int64]
+    pose_image: NDArray[np.int64]  # index of each pose's ImageSlices in the input
+    odometry_poses: NDArray[np.float64]  # (N, 3) initial map_T_base, from odometry
+    increments: NDArray[np.float64]  # (N-1, 3) odometry between consecutive poses
+    increment_stddev: NDArray[np.float64]  # (N-1, 3)
+    first_pose_stddev: NDArray[np.float64]  # (3,)
+    # Measurements (M)
+    measurements: NDArray[np.float64]  # (M, 4) bearing, width, elevation bottom, top (rad)
+    measurement_stddev: NDArray[np.float64]  # (M, 4)
+    measurement_pose: NDArray[np.int64]
+    measurement_label: NDArray[np.int64]
+    measurement_confidence: NDArray[np.float64]
+    measurement_image: NDArray[np.int64]
+    measurement_slot: NDArray[np.int64]
+    # Class priors (L)
+    prior_mean: NDArray[np.float64]  # (L, 5)
+    prior_stddev: NDArray[np.float64]  # (L, 5)
+    # Log-normalizers of the Gaussian factors
+    trajectory_log_normalizer: float  # odometry factors + first-pose prior
+    measurement_log_normalizer: NDArray[np.float64]  # (M,)
+    prior_log_normalizer: NDArray[np.float64]  # (L,)
+    rejected_image_count: int = 0
+    rejected_slice_count: int = 0
+
+    @property
+    def pose_count(self) -> int:
+        return len(self.stamps_ns)
+
+    @property
+    def measurement_count(self) -> int:
+        return len(self.measurements)
+
+    def label_of(self, measurement: int) -> str:
+        return self.labels[int(self.measurement_label[measurement])]
+
+
+def class_measurement_stddev(cls: ObjectClass, noise: SliceNoiseConfig, mount: CameraMount) -> NDArray[np.float64]:
+    stddev = np.array(
+        [
+            noise.bearing_stddev_rad,
+            noise.angular_width_stddev_rad,
+            noise.elevation_bottom_stddev_rad,
+            noise.elevation_top_stddev_rad,
+        ]
+    )
+    if not cls.on_floor and cls.z_base_m > mount.height_m:
+        stddev[ELEVATION_BOTTOM] = noise.raised_elevation_bottom_stddev_rad
+    return stddev
+
+
+def build_problem(
+    odometry: Sequence[OdometrySample],
+    images: Sequence[ImageSlices],
+    mount: CameraMount,
+    catalog: Catalog,
+    config: GraphConfig | None = None,
+) -> GraphProblem:
+    """The factor-graph problem of one run (see the module docstring)."""
+    config = config or GraphConfig()
+    if not images:
+        raise GraphError("no images: nothing to map")
+    order = np.argsort(np.array([im.stamp_ns for im in images], dtype=np.int64), kind="stable")
+    stamps = np.array([images[i].stamp_ns for i in order], dtype=np.int64)
+    try:
+        at = poses_at_stamps(odometry, stamps)
+    except TrajectoryError as exc:
+        raise GraphError(f"cannot place the robot: {exc}") from exc
+    if not at.accepted.any():
+        raise GraphError(f"none of the {len(images)} image stamps lies within the odometry span")
+    pose_image = order[at.accepted]
+    poses = at.poses
+    increments = odometry_increments(poses)
+    inc_stddev = increment_stddev(np.diff(at.path_length_m), np.diff(at.turn_rad), config.odometry)
+    first_stddev = np.array(
+        [config.odometry.first_pose_stddev_m, config.odometry.first_pose_stddev_m, config.odometry.first_pose_stddev_rad]
+    )
+
+    classes = tuple(catalog)
+    label_index = {cls.label: k for k, cls in enumerate(classes)}
+    class_stddev = [class_measurement_stddev(cls, config.slice_noise, mount) for cls in classes]
+    rows, stddev, pose_of, label_of, confidence, image_of, slot_of = [], [], [], [], [], [], []
+    rejected_slices = 0
+    for pose_index, image_index in enumerate(pose_image):
+        for slot, sl in enumerate(images[image_index].slices):
+            k = label_index.get(sl.label)
+            if k is None:
+                rejected_slices += 1
+                continue
+            rows.append((sl.bearing_rad, sl.angular_width_rad, sl.elevation_bottom_rad, sl.elevation_top_rad))
+            stddev.append(class_stddev[k])
+            pose_of.append(pose_index)
+            label_of.append(k)
+            confidence.append(sl.confidence)
+            image_of.append(image_index)
+            slot_of.append(slot)
+    if rejected_slices:
+        logger.warning("%d slices of classes not in the catalog were left out", rejected_slices)
+    meas_stddev = np.array(stddev, dtype=float).reshape(-1, 4)
+
+    first_xy = poses[0, :2]
+    prior_mean = np.array([[first_xy[0], first_xy[1], c.z_base_m, c.diameter_m, c.height_m] for c in classes])
+    prior_stddev = np.array(
+        [[c.xy_stddev_m, c.xy_stddev_m, c.z_base_stddev_m, c.diameter_stddev_m, c.height_stddev_m] for c in classes]
+    )
+    trajectory_norm = float(np.sum(gaussian_log_normalizer(inc_stddev)) + gaussian_log_normalizer(first_stddev))
+    problem = GraphProblem(
+        mount=mount,
+        solver=config.solver,
+        labels=tuple(c.label for c in classes),
+        stamps_ns=_readonly(stamps[at.accepted]),
+        pose_image=_readonly(pose_image.astype(np.int64)),
+        odometry_poses=_readonly(poses),
+        increments=_readonly(increments),
+        increment_stddev=_readonly(inc_stddev),
+        first_pose_stddev=_readonly(first_stddev),
+        measurements=_readonly(np.array(rows, dtype=float).reshape(-1, 4)),
+        measurement_stddev=_readonly(meas_stddev),
+        measurement_pose=_readonly(np.array(pose_of, dtype=np.int64)),
+        measurement_label=_readonly(np.array(label_of, dtype=np.int64)),
+        measurement_confidence=_readonly(np.array(confidence, dtype=float)),
+        measurement_image=_readonly(np.array(image_of, dtype=np.int64)),
+        measurement_slot=_readonly(np.array(slot_of, dtype=np.int64)),
+        prior_mean=_readonly(prior_mean.reshape(-1, OBJECT_DIM)),
+        prior_stddev=_readonly(prior_stddev.reshape(-1, OBJECT_DIM)),
+        trajectory_log_normalizer=trajectory_norm,
+        measurement_log_normalizer=_readonly(gaussian_log_normalizer(meas_stddev)),
+        prior_log_normalizer=_readonly(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
+        rejected_image_count=at.rejected_count,
+        rejected_slice_count=rejected_slices,
+    )
+    logger.info(
+        "factor graph: %d poses, %d measurements of %d classes (%d images, %d slices left out)",
+        problem.pose_count,
+        problem.measurement_count,
+        len(classes),
+        problem.rejected_image_count,
+        problem.rejected_slice_count,
+    )
+    return problem

@@ -1,0 +1,90 @@
+"""Typed, immutable input records of the mapper core.
+
+The mapper node (or a bag reader) turns ``/odom`` and ``/objslam/slices`` messages into
+these records at the edge; nothing below them knows about ROS. Stamps are integer
+nanoseconds; angles are radians in the camera frame (DESIGN.md, data contract).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+class RecordError(ValueError):
+    """An input record with impossible values."""
+
+
+def _require_finite(record: str, **values: float) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise RecordError(f"{record}: {name} must be finite, got {value}")
+
+
+def _require_stamp(record: str, stamp_ns: int) -> None:
+    if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int):
+        raise RecordError(f"{record}: stamp_ns must be an integer number of nanoseconds, got {stamp_ns!r}")
+
+
+@dataclass(frozen=True)
+class OdometrySample:
+    """One wheel-odometry pose odom_T_base at a stamp (the pose of ``/odom``)."""
+
+    stamp_ns: int
+    x_m: float
+    y_m: float
+    theta_rad: float
+
+    def __post_init__(self) -> None:
+        _require_stamp("OdometrySample", self.stamp_ns)
+        _require_finite("OdometrySample", x_m=self.x_m, y_m=self.y_m, theta_rad=self.theta_rad)
+
+
+@dataclass(frozen=True)
+class SliceMeasurement:
+    """One detection: an image slice of class ``label`` (DESIGN.md, messages: Slice).
+
+    ``bearing_rad`` is the azimuth of the slice centre, ``angular_width_rad`` its azimuth
+    extent, ``elevation_bottom_rad``/``elevation_top_rad`` the elevations of the blob's
+    lower and upper edges, all in the camera frame. The stamp is the image's
+    (:class:`ImageSlices`).
+    """
+
+    label: str
+    confidence: float
+    bearing_rad: float
+    angular_width_rad: float
+    elevation_bottom_rad: float
+    elevation_top_rad: float
+
+    def __post_init__(self) -> None:
+        _require_finite(
+            "SliceMeasurement",
+            confidence=self.confidence,
+            bearing_rad=self.bearing_rad,
+            angular_width_rad=self.angular_width_rad,
+            elevation_bottom_rad=self.elevation_bottom_rad,
+            elevation_top_rad=self.elevation_top_rad,
+        )
+        if not self.label:
+            raise RecordError("SliceMeasurement: label must not be empty")
+        if self.angular_width_rad <= 0.0:
+            raise RecordError(f"SliceMeasurement: angular_width_rad must be > 0, got {self.angular_width_rad}")
+        if self.elevation_top_rad < self.elevation_bottom_rad:
+            raise RecordError(
+                f"SliceMeasurement: elevation_top_rad {self.elevation_top_rad} is below "
+                f"elevation_bottom_rad {self.elevation_bottom_rad}"
+            )
+
+
+@dataclass(frozen=True)
+class ImageSlices:
+    """All detections of one image (a SliceArray); ``slices`` may be empty."""
+
+    stamp_ns: int
+    slices: tuple[SliceMeasurement, ...] = ()
+
+    def __post_init__(self) -> None:
+        _require_stamp("ImageSlices", self.stamp_ns)
+        if not isinstance(self.slices, tuple):
+            object.__setattr__(self, "slices", tuple(self.slices))

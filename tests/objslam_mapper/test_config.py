@@ -1,0 +1,66 @@
+"""The typed config mechanism: parameter files, validation, flattening."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pytest
+
+from objslam_mapper.config import ConfigError, flatten, from_mapping, load_config, setting, unflatten
+
+
+@dataclass(frozen=True)
+class Noise:
+    bearing_rad: float = setting(0.01, "bearing noise", minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Component:
+    samples: int = setting(6000, "samples", minimum=1)
+    enabled: bool = setting(True, "on")
+    noise: Noise = setting(Noise(), "noise")
+
+
+def test_parameter_file_section_overrides_defaults(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text("comp:\n  ros__parameters:\n    samples: 10\n    noise.bearing_rad: 0.5\nother:\n  x: 1\n")
+    config = load_config(Component, path, "comp")
+    assert config == Component(samples=10, noise=Noise(bearing_rad=0.5))
+
+
+def test_wildcard_section_applies(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    enabled: false\n")
+    assert load_config(Component, path, "comp").enabled is False
+
+
+@pytest.mark.parametrize(
+    ("mapping", "message"),
+    [
+        ({"sampels": 1}, "unknown setting 'sampels'"),
+        ({"samples": "many"}, "'samples' must be an integer"),
+        ({"samples": 0}, "'samples' must be >= 1"),
+        ({"enabled": 1}, "'enabled' must be true or false"),
+        ({"noise": {"bearing_rad": -1}}, "'noise.bearing_rad' must be >= 0"),
+        ({"noise": {"bering_rad": 1}}, "unknown setting 'noise.bering_rad'"),
+    ],
+)
+def test_bad_values_name_the_key(mapping, message):
+    with pytest.raises(ConfigError, match=message):
+        from_mapping(Component, mapping)
+
+
+def test_missing_and_malformed_files_are_config_errors(tmp_path):
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(Component, tmp_path / "nope.yaml", "comp")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("comp: [unclosed\n")
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(Component, bad, "comp")
+
+
+def test_flatten_round_trips_through_unflatten():
+    config = Component(samples=3, noise=Noise(0.2))
+    flat = flatten(config)
+    assert flat["noise.bearing_rad"] == (0.2, "bearing noise")
+    assert from_mapping(Component, unflatten({k: v for k, (v, _d) in flat.items()})) == config

@@ -1,0 +1,46 @@
+"""The map YAML: round trip, contract field names, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from objslam_mapper.map_file import BuiltMap, MapFileError, MappedObject, TrajectoryPose, read_map, write_map
+
+
+def _map() -> BuiltMap:
+    cov = tuple(tuple(float(v) for v in row) for row in np.diag([0.01, 0.02, 0.0001]))
+    return BuiltMap(
+        objects=(MappedObject(3, "red", (1.0, 2.0, 0.0), (0.3, 0.6), 0.93, cov, ((1e-4, 0.0), (0.0, 4e-4)), 42),),
+        rejected=(MappedObject(7, "cyan", (4.0, -1.0, 0.75), (0.15, 0.25), 0.2),),
+        trajectory=(TrajectoryPose(1_700_000_000_250_000_000, 0.5, -0.25, 0.1),),
+        diagnostics={"samples": 6000, "burn_in": 2500, "acceptance": {"merge": np.float64(0.1)}},
+    )
+
+
+def test_round_trip_keeps_everything(tmp_path):
+    path = write_map(tmp_path / "sub" / "map.yaml", _map())
+    assert read_map(path) == _map()
+
+
+def test_file_uses_the_contract_field_names(tmp_path):
+    data = yaml.safe_load(write_map(tmp_path / "m.yaml", _map()).read_text())
+    assert set(data) >= {"objects", "rejected", "trajectory", "diagnostics"}
+    obj = data["objects"][0]
+    assert obj["position"] == [1.0, 2.0, 0.0] and obj["size"] == [0.3, 0.6]
+    assert obj["existence_probability"] == 0.93 and obj["measurement_count"] == 42
+    assert data["trajectory"][0] == {
+        "stamp": 1700000000.25,
+        "x": 0.5,
+        "y": -0.25,
+        "theta": 0.1,
+        "stamp_ns": 1_700_000_000_250_000_000,
+    }
+
+
+def test_not_a_map_is_one_clear_error(tmp_path):
+    path = tmp_path / "x.yaml"
+    path.write_text("hello: 1\n")
+    with pytest.raises(MapFileError, match="not an objslam map file"):
+        read_map(path)
