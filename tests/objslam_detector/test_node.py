@@ -44,21 +44,26 @@ BAD_THEN_GOOD = textwrap.dedent(
     node = rclpy.create_node("bad_images")
     info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", qos_profile_sensor_data)
     raw_pub = node.create_publisher(Image, "/camera/image_raw", qos_profile_sensor_data)
-    time.sleep(2.0)
+    while raw_pub.get_subscription_count() == 0 or info_pub.get_subscription_count() == 0:
+        time.sleep(0.1)
+    time.sleep(0.5)
     def image(encoding, width, height, channels):
         msg = Image(encoding=encoding, width=width, height=height, step=width * channels)
         msg.header.frame_id = "camera"
         msg.data = bytes(width * height * channels)
         return msg
-    raw_pub.publish(image("rgb8", 640, 640, 3))  # before any camera info
+    for _ in range(10):  # before any camera info
+        raw_pub.publish(image("rgb8", 640, 640, 3))
+        time.sleep(0.1)
     info = CameraInfo(width=640, height=640, distortion_model="unified", d=[0.9])
     info.k = [170.0, 0.0, 320.0, 0.0, 170.0, 320.0, 0.0, 0.0, 1.0]
     for _ in range(20):
         info_pub.publish(info)
         time.sleep(0.05)
     for bad in (image("yuv422", 640, 640, 2), image("rgb8", 320, 320, 3), image("rgb8", 0, 0, 3)):
-        raw_pub.publish(bad)
-        time.sleep(0.2)
+        for _ in range(3):
+            raw_pub.publish(bad)
+            time.sleep(0.1)
     for _ in range(100):
         info_pub.publish(info)
         raw_pub.publish(image("rgb8", 640, 640, 3))
@@ -79,4 +84,6 @@ def test_bad_frames_are_skipped_with_a_warning_and_the_node_keeps_running(proces
     _out, err = detector.communicate(timeout=10)
     assert "waiting for camera info" in err
     assert "unsupported image encoding 'yuv422'" in err
+    assert "image is 320x320 px but the camera calibration is 640x640 px" in err
+    assert "skipped {'no camera info'" in err  # the summary at shutdown counts what was skipped
     assert "Traceback" not in err

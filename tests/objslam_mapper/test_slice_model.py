@@ -14,6 +14,7 @@ from objslam_mapper.slice_model import (
     ELEVATION_BOTTOM,
     ELEVATION_TOP,
     WIDTH,
+    camera_positions,
     predict_reduced,
     predict_slices,
     slice_error,
@@ -145,6 +146,13 @@ def test_reduced_form_is_the_full_jacobian():
     np.testing.assert_array_equal(reduced.jacobian[:, 2].T, full.d_pose[:, :, 2])
     np.testing.assert_array_equal(reduced.jacobian[:, 3].T, full.d_location[:, :, 2])
     np.testing.assert_array_equal(reduced.jacobian[:, 4:].transpose(2, 0, 1), full.d_size)
+
+
+def test_camera_positions_match_the_mount():
+    poses = np.array([[0.3, -0.2, 0.7], [1.0, 2.0, -2.5]])
+    x, y = camera_positions(poses, MOUNT)
+    for k, pose in enumerate(poses):
+        np.testing.assert_allclose([x[k], y[k]], MOUNT.camera_pose(pose)[:2])
 
 
 def test_camera_inside_the_object_is_flagged_invalid():

@@ -17,12 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_detector.config import BlobConfig
-
-# Splitting same-class blobs (split_at_steps): smallest jumps of the lower and upper edge
-# between neighbouring columns, and the fewest columns each part must keep.
-_BOTTOM_STEP_PX = 3
-_TOP_STEP_PX = 2
-_SPLIT_MIN_COLS = 4
+from objslam_detector.layers import Part, separate
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +33,7 @@ class Blob:
     col0: int
     row0: int
     mask: NDArray[np.bool_]
-    cut: bool = False  # split off a nearer same-class blob in front of it: its extent is partial
+    cut: bool = False  # separated from a nearer object of its class in front of it: partly hidden
 
     @property
     def rows(self) -> int:
@@ -60,8 +55,12 @@ class Blob:
 class Segmenter:
     """Finds and gates the blobs of a class-index panorama."""
 
-    def __init__(self, config: BlobConfig, azimuth_step_rad: float, elevation_step_rad: float) -> None:
+    def __init__(
+        self, config: BlobConfig, azimuth_step_rad: float, elevation_step_rad: float, horizon_row: float
+    ) -> None:
         self.config = config
+        # Layered separation reads "nearer" as "lower edge lower": true only below the camera.
+        self._horizon_row = horizon_row
         self._min_cols = max(1, math.ceil(math.radians(config.min_angular_width_deg) / azimuth_step_rad - 1e-9))
         self._max_cols = math.floor(math.radians(config.max_angular_width_deg) / azimuth_step_rad + 1e-9)
         self._min_rows = max(1, math.ceil(math.radians(config.min_angular_height_deg) / elevation_step_rad - 1e-9))
@@ -93,7 +92,13 @@ class Segmenter:
         for j in range(1, count):
             bx, by, bw, bh, area = (int(v) for v in stats[j])
             if area >= self.config.min_pixel_count:
-                out.extend(split_at_steps(Blob(k, x + bx, y + by, labels[by : by + bh, bx : bx + bw] == j)))
+                own = labels[by : by + bh, bx : bx + bw] == j
+                below_camera = y + by + bh > self._horizon_row
+                if self.config.separate_same_class and below_camera:
+                    parts = separate(own)
+                else:
+                    parts = [Part(0, 0, own, False)]
+                out.extend(Blob(k, x + bx + p.col0, y + by + p.row0, p.mask, p.cut) for p in parts)
         return out
 
     def _passes(self, blob: Blob) -> bool:
@@ -103,45 +108,6 @@ class Segmenter:
             and blob.rows >= self._min_rows
             and blob.fill_ratio >= self.config.min_fill_ratio
         )
-
-
-def split_at_steps(blob: Blob, min_side_cols: int = _SPLIT_MIN_COLS) -> list[Blob]:
-    """Split a blob where a nearer object partly hides a farther one of the same class.
-
-    A vertical cylinder's lower and upper edges run smoothly across its columns (steeply
-    only in its outermost columns). Where both jump between two neighbouring columns,
-    away from the blob's ends, two objects at different ranges meet: the nearer one's
-    silhouette ends there. A step in the lower edge alone is a grey thing hiding the
-    bottom of one object, which must stay whole. The part whose lower edge is higher
-    (farther, for objects standing below the camera) is marked ``cut``.
-    """
-    mask = blob.mask
-    rows, cols = mask.shape
-    present = mask.any(axis=0)
-    if cols < 2 * min_side_cols or not present.all():
-        return [blob]
-    top = np.argmax(mask, axis=0)
-    bottom = rows - 1 - np.argmax(mask[::-1], axis=0)
-    bottom_step = np.abs(np.diff(bottom))
-    top_step = np.abs(np.diff(top))
-    # The upper edge may jump one column off the lower edge's jump (pixel dithering).
-    top_near = np.maximum(top_step, np.maximum(np.r_[0, top_step[:-1]], np.r_[top_step[1:], 0]))
-    candidate = (bottom_step >= _BOTTOM_STEP_PX) & (top_near >= _TOP_STEP_PX)
-    candidate[: min_side_cols - 1] = False
-    candidate[cols - min_side_cols :] = False
-    if not candidate.any():
-        return [blob]
-    k = int(np.argmax(np.where(candidate, bottom_step, -1)))  # boundary between columns k and k + 1
-    left_far = bottom[k] < bottom[k + 1]
-    parts = []
-    for lo, hi, far in ((0, k + 1, left_far), (k + 1, cols, not left_far)):
-        part = mask[:, lo:hi]
-        used = np.flatnonzero(part.any(axis=1))
-        piece = Blob(
-            blob.class_index, blob.col0 + lo, blob.row0 + int(used[0]), part[used[0] : used[-1] + 1], blob.cut or far
-        )
-        parts.extend(split_at_steps(piece, min_side_cols))
-    return parts
 
 
 def clean(class_index: NDArray[np.uint8], opening_kernel_px: int) -> NDArray[np.uint8]:

@@ -70,6 +70,9 @@ class BlobConfig:
     min_fill_ratio: float = setting(
         0.3, "fewest blob pixels per pixel of its bounding box (cylinders are nearly full)", minimum=0.0, maximum=1.0
     )
+    separate_same_class: bool = setting(
+        True, "split blobs where one object of a class partly hides another of the same class"
+    )
     truncated_confidence: float = setting(
         0.5,
         "confidence of a slice that touches another class's blob or the edge of the view (likely cut short)",

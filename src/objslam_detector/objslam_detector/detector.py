@@ -88,7 +88,8 @@ class Detector:
         if entry is None:
             pano = Panorama.build(camera, self.config.panorama)
             logger.debug("panorama %dx%d px for %s", pano.cols, pano.rows, camera)
-            entry = (pano, Segmenter(self.config.blobs, pano.azimuth_step_rad, pano.elevation_step_rad))
+            horizon_row = float(pano.row_of_elevation(0.0))
+            entry = (pano, Segmenter(self.config.blobs, pano.azimuth_step_rad, pano.elevation_step_rad, horizon_row))
             self._panoramas[camera] = entry
             while len(self._panoramas) > _PANORAMA_CACHE_SIZE:
                 self._panoramas.popitem(last=False)

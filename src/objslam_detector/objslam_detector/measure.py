@@ -30,6 +30,7 @@ _TWO_PI = 2.0 * math.pi
 # Rim extremes are fitted over this central part of the width, from at least this many columns.
 _CENTRAL_FRACTION = 0.6
 _MIN_FIT_COLUMNS = 4
+_NEIGHBOURS = np.array([-2, -1, 0, 1])
 
 
 def chroma(rgb: NDArray[np.uint8]) -> NDArray[np.float32]:
@@ -43,19 +44,18 @@ def refine_rising_edges(profiles: NDArray[np.float32], first: NDArray[np.intp]) 
     background before it and one object pixel after it. Falls back to ``first`` where
     the contrast is too low, and never moves an edge by more than one pixel.
     """
-    rows = np.arange(len(first))
-    outside = profiles[rows, first - 2]
-    a = profiles[rows, first - 1]
-    b = profiles[rows, first]
-    c = profiles[rows, first + 1]
+    outside, a, b, c = np.take_along_axis(profiles, first[:, None] + _NEIGHBOURS, axis=1).T
     inside = np.maximum(b, c)
     half = 0.5 * (inside + outside)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        before = first - 0.5 + (half - a) / (b - a)  # crossing between the centres of first - 1 and first
-        after = first + 0.5 + (half - b) / (c - b)  # between first and first + 1
-    edge = np.where(b >= half, before, after)
-    usable = (inside - outside >= _MIN_CONTRAST) & np.isfinite(edge)
-    return np.clip(np.where(usable, edge, first), first - 1.0, first + 1.0)
+    rising = b >= half
+    # Crossing between the centres of first - 1 and first, or of first and first + 1.
+    low = np.where(rising, a, b)
+    high = np.where(rising, b, c)
+    step = high - low
+    usable = (inside - outside >= _MIN_CONTRAST) & (step > 0)
+    fraction = (half - low) / np.where(usable, step, 1.0)
+    edge = first + np.where(rising, -0.5, 0.5) + fraction
+    return np.minimum(np.maximum(np.where(usable, edge, first), first - 1.0), first + 1.0)
 
 
 def _side_edges(chroma_roi: NDArray[np.float32], own: NDArray[np.bool_]) -> tuple[float, float]:
@@ -89,13 +89,25 @@ def _outermost(profiles: NDArray[np.float32], mask: NDArray[np.bool_], left: flo
         return float(refine_rising_edges(profiles[present], first[present]).min())
     x = columns[central] - centre
     edges = refine_rising_edges(profiles[central], first[central])
-    c2, c1, c0 = np.polyfit(x, edges, 2)
+    c0, c1, c2 = _quadratic_fit(x, edges)
     candidates = [-half, half]
     if c2 > 0 and abs(c1) < 2.0 * c2 * half:
         candidates.append(-c1 / (2.0 * c2))
     extreme = min(c0 + c1 * v + c2 * v * v for v in candidates)
     # A fit gone wild (a blob of odd shape) must not move the edge far from the pixels.
     return float(np.clip(extreme, binary - 1.0, binary + 1.0))
+
+
+def _quadratic_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, float, float]:
+    """Least-squares ``y = c0 + c1 x + c2 x^2`` (normal equations: a handful of points, called per blob)."""
+    powers = np.vander(x, 5, increasing=True).sum(axis=0)
+    normal = powers[[[0, 1, 2], [1, 2, 3], [2, 3, 4]]]
+    rhs = np.array([y.sum(), (x * y).sum(), (x * x * y).sum()])
+    try:
+        c0, c1, c2 = np.linalg.solve(normal, rhs)
+    except np.linalg.LinAlgError:
+        return float(np.mean(y)), 0.0, 0.0
+    return float(c0), float(c1), float(c2)
 
 
 def _extreme_edges(

@@ -8,11 +8,10 @@ no camera info yet) is skipped with a rate-limited warning saying why, and count
 from __future__ import annotations
 
 import sys
+import time
 from collections import Counter
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -24,8 +23,8 @@ from objslam_detector.images import decode_compressed, image_from_buffer
 from objslam_detector.slices import DetectedSlice
 from objslam_mapper.camera import CameraModelError, UnifiedCamera
 from objslam_mapper.catalog import load_catalog
-from objslam_mapper.config import ConfigError
 from objslam_mapper.ros.params import declare_config
+from objslam_mapper.ros.spin import run_node
 from objslam_msgs.msg import Slice, SliceArray
 
 SLICES_TOPIC = "/objslam/slices"
@@ -58,6 +57,7 @@ class DetectorNode(Node):
         self.camera: UnifiedCamera | None = None
         self.skipped: Counter[str] = Counter()
         self.processed = 0
+        self._last_warned: dict[str, float] = {}
 
         self.slices_pub = self.create_publisher(SliceArray, SLICES_TOPIC, QoSProfile(depth=100))
         self.debug_pub = (
@@ -96,10 +96,18 @@ class DetectorNode(Node):
     def on_compressed(self, msg: CompressedImage) -> None:
         self._process(msg.header, lambda: decode_compressed(msg.data, msg.format))
 
+    def summary(self) -> str:
+        skipped = f", skipped {dict(self.skipped)}" if self.skipped else ""
+        return f"processed {self.processed} frames{skipped}"
+
     def _skip(self, reason: str, detail: str) -> None:
         self.skipped[reason] += 1
         total = sum(self.skipped.values())
-        self.get_logger().warn(f"skipped a frame ({total} so far): {detail}", throttle_duration_sec=WARN_PERIOD_S)
+        # Rate-limited per reason, so a second, different problem is still reported at once.
+        now = time.monotonic()
+        if now - self._last_warned.get(detail, -WARN_PERIOD_S) >= WARN_PERIOD_S:
+            self._last_warned[detail] = now
+            self.get_logger().warn(f"skipped a frame ({total} so far): {detail}")
 
     def _process(self, header, decode) -> None:
         if self.camera is None:
@@ -135,23 +143,7 @@ class DetectorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = DetectorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConfigError as exc:
-        print(f"detector: error: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            if node.skipped:
-                node.get_logger().info(f"processed {node.processed} frames, skipped {dict(node.skipped)}")
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("detector", DetectorNode, args)
 
 
 if __name__ == "__main__":

@@ -44,15 +44,9 @@ class OdometryNoiseConfig:
     xy_stddev_per_sqrt_m: float = setting(
         0.05, "translation stddev (m) accumulated over 1 m of travel (variance grows with distance)", minimum=0.0
     )
-    xy_stddev_per_sqrt_rad: float = setting(
-        0.02, "translation stddev (m) accumulated over 1 rad of turn", minimum=0.0
-    )
-    theta_stddev_per_sqrt_m: float = setting(
-        0.03, "heading stddev (rad) accumulated over 1 m of travel", minimum=0.0
-    )
-    theta_stddev_per_sqrt_rad: float = setting(
-        0.05, "heading stddev (rad) accumulated over 1 rad of turn", minimum=0.0
-    )
+    xy_stddev_per_sqrt_rad: float = setting(0.02, "translation stddev (m) accumulated over 1 rad of turn", minimum=0.0)
+    theta_stddev_per_sqrt_m: float = setting(0.03, "heading stddev (rad) accumulated over 1 m of travel", minimum=0.0)
+    theta_stddev_per_sqrt_rad: float = setting(0.05, "heading stddev (rad) accumulated over 1 rad of turn", minimum=0.0)
     min_xy_stddev_m: float = setting(0.002, "smallest translation stddev of one increment (m)", minimum=1e-9)
     min_theta_stddev_rad: float = setting(0.002, "smallest heading stddev of one increment (rad)", minimum=1e-9)
     first_pose_stddev_m: float = setting(
@@ -80,6 +74,16 @@ class SliceNoiseConfig:
         "whose top hides the object's lowest part (the measured edge is then the support's rim)",
         minimum=1e-9,
     )
+    low_confidence: float = setting(
+        0.5,
+        "slices with at most this confidence are likely cut short (the detector halves the confidence of a "
+        "blob touching another class or the edge of the view)",
+        minimum=0.0,
+        maximum=1.0,
+    )
+    low_confidence_stddev_scale: float = setting(
+        4.0, "the noise stddevs of such slices are multiplied by this", minimum=1.0
+    )
 
 
 @dataclass(frozen=True)
@@ -95,16 +99,22 @@ class SolverConfig:
         1e-4, "Levenberg-Marquardt damping (relative to the diagonal) after a failed Gauss-Newton step", minimum=1e-12
     )
     max_lambda: float = setting(1e8, "give up when the damping grows beyond this", minimum=1.0)
+    dense_object_limit: int = setting(
+        40,
+        "up to this many objects the linear systems are solved by the objects' dense Schur complement, "
+        "beyond it by a sparse LU (faster when many objects are small tracklets)",
+        minimum=0,
+    )
 
 
 @dataclass(frozen=True)
 class GraphConfig:
     """Everything the factor graph needs besides the catalog."""
 
-    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")
-    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")
-    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")
-    solver: SolverConfig = setting(SolverConfig(), "known-association solver")
+    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")  # noqa: RUF009
+    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")  # noqa: RUF009
+    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")  # noqa: RUF009
+    solver: SolverConfig = setting(SolverConfig(), "known-association solver")  # noqa: RUF009
 
 
 GRAPH_SECTIONS = tuple(f.name for f in dataclasses.fields(GraphConfig))

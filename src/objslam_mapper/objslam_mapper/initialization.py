@@ -11,8 +11,7 @@ class prior (paper section 2: apparent size yields range even from one sighting)
 The ranges are fused by inverse variance (first order), each slice becomes a 2D Gaussian
 guess of the axis (tight across its ray, loose along it), and the guesses are fused in
 information form, which triangulates when the object was seen from several places. Base
-height and size start at the class prior. If the guess would put a pose inside the
-object, the starting diameter shrinks so the model is defined at every member pose.
+height and size start at the class prior.
 """
 
 from __future__ import annotations
@@ -23,14 +22,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_mapper.problem import GraphProblem
-from objslam_mapper.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH
+from objslam_mapper.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, camera_positions
 
 _MIN_ELEVATION_RAD = 0.01  # an edge nearer the horizon says little about range
 _MIN_FACE_OFFSET_M = 0.05  # a face this close to the camera height says little about range
 
 
 def _range_from_edge(
-    face_m: float, face_var: float, radius: float, radius_var: float, elevation: NDArray, elevation_var: NDArray, far: bool
+    face_m: float,
+    face_var: float,
+    radius: float,
+    radius_var: float,
+    elevation: NDArray,
+    elevation_var: NDArray,
+    far: bool,
 ) -> tuple[NDArray, NDArray]:
     """Range and variance from one edge; NaN/inf where the edge is not informative."""
     usable = (np.abs(face_m) > _MIN_FACE_OFFSET_M) & (np.sign(elevation) == np.sign(face_m))
@@ -43,7 +48,9 @@ def _range_from_edge(
     return np.where(usable, dist, np.nan), np.where(usable, var, np.inf)
 
 
-def initial_object(problem: GraphProblem, indices: Sequence[int], map_T_base: NDArray[np.float64]) -> NDArray[np.float64]:
+def initial_object(
+    problem: GraphProblem, indices: Sequence[int], map_T_base: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """Starting (x, y, z_base, diameter, height) of an object seen by ``indices``."""
     idx = np.asarray(indices, dtype=np.int64)
     label = int(problem.measurement_label[idx[0]])
@@ -53,9 +60,7 @@ def initial_object(problem: GraphProblem, indices: Sequence[int], map_T_base: ND
     mount = problem.mount
 
     pose = np.asarray(map_T_base, dtype=float)[problem.measurement_pose[idx]]
-    cos_t, sin_t = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-    cam_x = pose[:, 0] + cos_t * mount.offset_x_m - sin_t * mount.offset_y_m
-    cam_y = pose[:, 1] + sin_t * mount.offset_x_m + cos_t * mount.offset_y_m
+    cam_x, cam_y = camera_positions(pose, mount)
     z = problem.measurements[idx]
     var = problem.measurement_stddev[idx] ** 2
 
@@ -85,11 +90,7 @@ def initial_object(problem: GraphProblem, indices: Sequence[int], map_T_base: ND
     across = 1.0 / (fused**2 * var[:, BEARING])
     u = np.stack([ux, uy], axis=-1)
     n = np.stack([-uy, ux], axis=-1)
-    info = (along[:, None, None] * u[:, :, None] * u[:, None, :] + across[:, None, None] * n[:, :, None] * n[:, None, :])
+    info = along[:, None, None] * u[:, :, None] * u[:, None, :] + across[:, None, None] * n[:, :, None] * n[:, None, :]
     info_sum = info.sum(axis=0)
     xy = np.linalg.solve(info_sum, np.einsum("kij,kj->i", info, guess))
-
-    # Keep every member pose outside the starting cylinder (the model needs D > r).
-    nearest = float(np.min(np.hypot(xy[0] - cam_x, xy[1] - cam_y)))
-    start_diameter = min(diameter, 1.8 * nearest) if nearest > 0.0 else diameter
-    return np.array([xy[0], xy[1], z_base, max(start_diameter, 1e-3), height])
+    return np.array([xy[0], xy[1], z_base, diameter, height])

@@ -7,10 +7,11 @@ sampler (:func:`objslam_mapper.solver.solve`). It holds
 - one robot pose per image inside the odometry span (sorted by stamp), initialized from
   interpolated odometry, with odometry factors between consecutive poses and a tight
   prior on the first pose (which fixes the map frame to ``odom``);
-- every slice of those images under a **global measurement index** ``m`` (image order,
-  then slice order): ``measurements[m]`` = (bearing, angular width, elevation bottom,
+- every slice of those images under a **global measurement index** ``m`` (pose order,
+  i.e. images by stamp, then slice order): ``measurements[m]`` = (bearing, angular width, elevation bottom,
   elevation top), its noise, the pose it was seen from, its class; ``measurement_image``
-  and ``measurement_slot`` lead back to the input ``images[i].slices[k]``;
+  and ``measurement_slot`` lead back to the input ``images[i].slices[k]``. Slices of
+  low confidence (likely cut short) get inflated noise;
 - the class priors (paper eqs. 7-8) as per-class means and standard deviations of the
   object vector ``(x, y, z_base, diameter, height)``: ``x, y`` weak around the first
   pose (``xy_stddev_m``), ``z_base`` and the size from the catalog;
@@ -140,7 +141,11 @@ def build_problem(
     increments = odometry_increments(poses)
     inc_stddev = increment_stddev(np.diff(at.path_length_m), np.diff(at.turn_rad), config.odometry)
     first_stddev = np.array(
-        [config.odometry.first_pose_stddev_m, config.odometry.first_pose_stddev_m, config.odometry.first_pose_stddev_rad]
+        [
+            config.odometry.first_pose_stddev_m,
+            config.odometry.first_pose_stddev_m,
+            config.odometry.first_pose_stddev_rad,
+        ]
     )
 
     classes = tuple(catalog)
@@ -155,7 +160,8 @@ def build_problem(
                 rejected_slices += 1
                 continue
             rows.append((sl.bearing_rad, sl.angular_width_rad, sl.elevation_bottom_rad, sl.elevation_top_rad))
-            stddev.append(class_stddev[k])
+            truncated = sl.confidence <= config.slice_noise.low_confidence
+            stddev.append(class_stddev[k] * (config.slice_noise.low_confidence_stddev_scale if truncated else 1.0))
             pose_of.append(pose_index)
             label_of.append(k)
             confidence.append(sl.confidence)

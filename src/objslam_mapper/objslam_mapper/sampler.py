@@ -408,29 +408,42 @@ class MetropolisHastings:
         log_r = self._kinds(new).log_prob("merge") + self._merges(new).log_prob(pair)
         return Proposal("split", new, log_f, log_r)
 
-    def _move_tracklet(self, view: _View, t: int, rng: np.random.Generator) -> tuple[_View, float, float]:
-        """Move t to a drawn destination.
-
-        Returns the new view, the log probability of the destination drawn here, and that
-        of the destination bringing t back, drawn in the new state (0 when t came from
-        clutter: going back to clutter draws no destination).
-        """
-        destinations = self._destinations(view, t)
-        dest = destinations.draw(rng)
+    def _move_tracklet(self, view: _View, t: int, rng: np.random.Generator) -> tuple[_View, int]:
+        """Move t to a drawn destination: the new view and the destination key."""
+        dest = self._destinations(view, t).draw(rng)
         assignment = list(view.assignment)
         assignment[t] = len(view.groups) if dest == _NEW else dest
-        new = self._view_of(assignment)
-        if view.assignment[t] == CLUTTER:
-            return new, destinations.log_prob(dest), 0.0
+        return self._view_of(assignment), dest
+
+    def _way_back(self, view: _View, new: _View, t: int) -> int:
+        """The destination key, in ``new``, that returns t to where it was in ``view``."""
         rest = view.others_in_object(t)
-        back = new.assignment[rest[0]] if rest else _NEW
-        return new, destinations.log_prob(dest), self._destinations(new, t).log_prob(back)
+        return new.assignment[rest[0]] if rest else _NEW
+
+    def _log_reassign(self, view: _View, t: int, dest: int) -> float:
+        """log q of the state reached by reassigning t to ``dest``, without the kind factor.
+
+        Two tracklets t, u lead to the same state in two ways: merging singletons {t} and
+        {u} (t joins u, or u joins t) and splitting {t, u} (t leaves, or u leaves); q sums
+        both. Every other reassignment reaches its state in exactly one way.
+        """
+        log_q = self._destinations(view, t).log_prob(dest)
+        own = view.groups[view.assignment[t]]
+        twin: tuple[int, int] | None = None
+        if len(own) == 1 and dest != _NEW and len(view.groups[dest]) == 1:
+            twin = (view.groups[dest][0], view.assignment[t])
+        elif len(own) == 2 and dest == _NEW:
+            twin = (own[0] if own[1] == t else own[1], _NEW)
+        if twin is not None:
+            log_q = float(np.logaddexp(log_q, self._destinations(view, twin[0]).log_prob(twin[1])))
+        return log_q - math.log(len(self._movable(view)))
 
     def _propose_reassign(self, view: _View, rng: np.random.Generator) -> Proposal:
         movable = self._movable(view)
-        new, log_dest_f, log_dest_r = self._move_tracklet(view, movable[int(rng.integers(len(movable)))], rng)
-        log_f = self._kinds(view).log_prob("reassign") - math.log(len(movable)) + log_dest_f
-        log_r = self._kinds(new).log_prob("reassign") - math.log(len(self._movable(new))) + log_dest_r
+        t = movable[int(rng.integers(len(movable)))]
+        new, dest = self._move_tracklet(view, t, rng)
+        log_f = self._kinds(view).log_prob("reassign") + self._log_reassign(view, t, dest)
+        log_r = self._kinds(new).log_prob("reassign") + self._log_reassign(new, t, self._way_back(view, new, t))
         return Proposal("reassign", new, log_f, log_r)
 
     def _propose_to_clutter(self, view: _View, rng: np.random.Generator) -> Proposal:
@@ -439,18 +452,18 @@ class MetropolisHastings:
         assignment = list(view.assignment)
         assignment[t] = CLUTTER
         new = self._view_of(assignment)
-        rest = view.others_in_object(t)
-        back = new.assignment[rest[0]] if rest else _NEW
         log_f = self._kinds(view).log_prob("to_clutter") - math.log(len(in_objects))
         log_r = self._kinds(new).log_prob("from_clutter") - math.log(len(new.state.clutter))
-        log_r += self._destinations(new, t).log_prob(back)
+        log_r += self._destinations(new, t).log_prob(self._way_back(view, new, t))
         return Proposal("to_clutter", new, log_f, log_r)
 
     def _propose_from_clutter(self, view: _View, rng: np.random.Generator) -> Proposal:
         clutter = view.state.clutter
-        new, log_dest_f, _ = self._move_tracklet(view, clutter[int(rng.integers(len(clutter)))], rng)
+        t = clutter[int(rng.integers(len(clutter)))]
+        new, dest = self._move_tracklet(view, t, rng)
         n_in_objects = new.state.n_tracklets - len(new.state.clutter)
-        log_f = self._kinds(view).log_prob("from_clutter") - math.log(len(clutter)) + log_dest_f
+        log_f = self._kinds(view).log_prob("from_clutter") - math.log(len(clutter))
+        log_f += self._destinations(view, t).log_prob(dest)
         log_r = self._kinds(new).log_prob("to_clutter") - math.log(n_in_objects)
         return Proposal("from_clutter", new, log_f, log_r)
 

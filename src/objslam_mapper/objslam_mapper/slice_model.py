@@ -90,6 +90,16 @@ class ReducedPrediction:
     jacobian: NDArray[np.float64] | None = None
 
 
+def camera_positions(map_T_base: ArrayLike, mount: CameraMount) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Map x, y of the camera for (M, 3) robot poses (vectorized ``CameraMount.camera_pose``)."""
+    pose = np.atleast_2d(np.asarray(map_T_base, dtype=float))
+    cos_t, sin_t = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    return (
+        pose[:, 0] + cos_t * mount.offset_x_m - sin_t * mount.offset_y_m,
+        pose[:, 1] + sin_t * mount.offset_x_m + cos_t * mount.offset_y_m,
+    )
+
+
 def _columns(array: ArrayLike, width: int, rows: int) -> NDArray[np.float64]:
     """(width, rows) component-major copy of an (M, width) or (width,) input."""
     a = np.atleast_2d(np.asarray(array, dtype=float))[:, :width]

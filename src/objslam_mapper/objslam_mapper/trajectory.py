@@ -16,6 +16,7 @@ not its chord),
 
 from __future__ import annotations
 
+import itertools
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -102,7 +103,7 @@ def poses_at_stamps(odometry: Sequence[OdometrySample], stamps_ns: Sequence[int]
 def odometry_increments(poses: NDArray[np.float64]) -> NDArray[np.float64]:
     """(N-1, 3) motions between consecutive poses, each in the frame of the earlier pose."""
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-    return np.array([between(a, b) for a, b in zip(poses[:-1], poses[1:], strict=True)]).reshape(-1, 3)
+    return np.array([between(a, b) for a, b in itertools.pairwise(poses)]).reshape(-1, 3)
 
 
 def increment_stddev(

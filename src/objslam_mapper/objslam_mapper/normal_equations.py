@@ -1,0 +1,428 @@
+r"""Normal equations of one association: assembled vectorized, solved by sparse elimination.
+
+The variables are the poses (N x 3, additive x, y, theta) and the objects (K x 5:
+x, y, z_base, diameter, height). The factors are the odometry factors between
+consecutive poses, the first-pose prior, one slice factor per assigned measurement
+(:mod:`objslam_mapper.slice_model`) and one class prior per object; all residuals are
+whitened. :class:`AssociationSystem` evaluates the cost and the Gauss-Newton system
+``Lambda step = -g`` (``Lambda = J^T J``) with numpy over all measurements at once, with
+the measurement axis last so every operation runs over contiguous arrays.
+
+Two ways solve it, both exact (``log|Lambda|`` is what GTSAM's ``2 log|R|`` gives):
+
+- up to ``solver.dense_object_limit`` objects, by eliminating the poses first. Their
+  block ``A`` is block-tridiagonal: a band of half-width 5, factored by LAPACK's banded
+  Cholesky (``A = U^T U``). With ``B`` the pose-object block and ``C`` the object block,
+  ``W = U^-T B`` gives the objects' Schur complement ``S = C - W^T W`` (dense, 5K x 5K),
+  ``log|Lambda| = log|A| + log|S|``, and the object marginal covariances are the blocks of
+  ``S^-1``. This is the fast path for a map's worth of long-lived objects.
+- beyond, by a sparse LU (SuperLU, minimum-degree ordering, symmetric mode without
+  pivoting, which is Cholesky in disguise for a positive definite matrix): many small
+  objects (tracklets seen over a few poses) are then eliminated into the pose band
+  instead of making the dense Schur complement (cubic in K) large.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+import scipy.sparse.linalg
+from numpy.typing import ArrayLike, NDArray
+from scipy.linalg import lapack
+
+from objslam_mapper.geometry import wrap_angle
+from objslam_mapper.problem import OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
+from objslam_mapper.slice_model import BEARING, predict_reduced
+
+_BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Index arrays of one association, fixed for the whole solve (measurement axis last)."""
+
+    n_poses: int
+    groups: tuple[NDArray[np.int64], ...]
+    measurements: NDArray[np.int64]  # (A,) assigned measurements, grouped by object
+    object_of: NDArray[np.int64]
+    pose_of: NDArray[np.int64]
+    labels: NDArray[np.int64]  # (K,) label index of each object
+    pose_bins: NDArray[np.int64]  # (3, 3, A) bins of the per-slice pose blocks in (N, 3, 3)
+    pose_grad_bins: NDArray[np.int64]  # (3, A) bins in (N, 3)
+    starts: NDArray[np.int64]  # (K,) where each object's run of measurements starts
+    cross_bins: NDArray[np.int64]  # (3, 5, A) bins in the (3N, 5K) pose-object block
+    cross_unique: bool  # no image saw one object twice: the cross blocks need no summing
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.groups)
+
+    @functools.cached_property
+    def sparse(self) -> _SparsePattern:
+        return _SparsePattern.of(self)
+
+
+@dataclass
+class Linearization:
+    """Cost and normal equations at one state (``valid`` False: the model is undefined there)."""
+
+    cost: float
+    valid: bool
+    grad_pose: NDArray[np.float64] | None = None  # (3N,)
+    grad_object: NDArray[np.float64] | None = None  # (5K,)
+    pose_diag: NDArray[np.float64] | None = None  # (N, 3, 3)
+    pose_off: NDArray[np.float64] | None = None  # (N-1, 3, 3): block (i, i+1)
+    cross: NDArray[np.float64] | None = None  # (3, 5, A) pose-object block of each slice
+    object_diag: NDArray[np.float64] | None = None  # (K, 5, 5)
+    _pose_object: NDArray[np.float64] | None = field(default=None, repr=False)
+
+    def pose_object(self, layout: Layout) -> NDArray[np.float64]:
+        """The dense (3N, 5K) pose-object block (built once)."""
+        if self._pose_object is None:
+            shape = (POSE_DIM * layout.n_poses, OBJECT_DIM * layout.n_objects)
+            if layout.cross_unique:
+                block = np.zeros(shape)
+                block.ravel()[layout.cross_bins.ravel()] = self.cross.ravel()
+            else:
+                block = _bin_sum(layout.cross_bins, self.cross, shape)
+            self._pose_object = block
+        return self._pose_object
+
+    def diagonal(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Diagonals of the pose (3N,) and object (5K,) blocks."""
+        i3, i5 = np.arange(POSE_DIM), np.arange(OBJECT_DIM)
+        return self.pose_diag[:, i3, i3].ravel(), self.object_diag[:, i5, i5].ravel()
+
+
+@dataclass
+class Factorization:
+    """A solved (damped) system: step, log-determinant, and what the covariances need."""
+
+    log_det: float
+    step_pose: NDArray[np.float64]
+    step_object: NDArray[np.float64]
+    predicted_decrease: float
+    chol_schur: NDArray[np.float64] | None = None  # dense path: upper Cholesky factor of S
+    sparse_lu: scipy.sparse.linalg.SuperLU | None = None  # sparse path
+
+
+def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike]) -> Layout:
+    """Validate an association (one array of measurement indices per object) and index it."""
+    arrays = tuple(np.asarray(g, dtype=np.int64).reshape(-1) for g in groups)
+    sizes = np.array([len(g) for g in arrays], dtype=np.int64)
+    if np.any(sizes == 0):
+        raise GraphError("every group must hold at least one measurement")
+    measurements = np.concatenate(arrays) if arrays else np.zeros(0, dtype=np.int64)
+    if len(measurements) and (measurements.min() < 0 or measurements.max() >= problem.measurement_count):
+        raise GraphError(f"measurement indices must lie in [0, {problem.measurement_count})")
+    if np.any(np.bincount(measurements, minlength=problem.measurement_count) > 1):
+        raise GraphError("a measurement is assigned to more than one object (or twice to one)")
+    object_of = np.repeat(np.arange(len(arrays), dtype=np.int64), sizes)
+    label_of = problem.measurement_label[measurements]
+    labels = label_of[np.cumsum(sizes) - sizes] if len(arrays) else np.zeros(0, dtype=np.int64)
+    mixed = label_of != labels[object_of]
+    if np.any(mixed):
+        raise GraphError(f"group {int(object_of[np.argmax(mixed)])} mixes classes; an object holds one class")
+    for g in arrays:
+        g.flags.writeable = False
+    pose_of = problem.measurement_pose[measurements]
+    n_cols = OBJECT_DIM * len(arrays)
+    p3, o5 = np.arange(POSE_DIM)[:, None], np.arange(OBJECT_DIM)[:, None]
+    return Layout(
+        n_poses=problem.pose_count,
+        groups=arrays,
+        measurements=measurements,
+        object_of=object_of,
+        pose_of=pose_of,
+        labels=labels,
+        pose_bins=(POSE_DIM * pose_of + p3)[:, None, :] * POSE_DIM + p3.T[:, :, None],
+        pose_grad_bins=POSE_DIM * pose_of + p3,
+        starts=np.cumsum(sizes) - sizes,
+        cross_bins=(POSE_DIM * pose_of + p3)[:, None, :] * n_cols + (OBJECT_DIM * object_of + o5)[None, :, :],
+        cross_unique=not len(measurements) or np.bincount(pose_of * len(arrays) + object_of).max() == 1,
+    )
+
+
+@dataclass(frozen=True)
+class _SparsePattern:
+    """CSC structure of the whole of Lambda, and where each block entry's value lands in it.
+
+    The values of one linearization are concatenated in the order of ``_sparse_values``
+    and summed into ``data`` by ``slot`` (repeated entries, e.g. two slices of one object
+    in one image, add up).
+    """
+
+    dimension: int
+    indices: NDArray[np.int32]
+    indptr: NDArray[np.int32]
+    slot: NDArray[np.int64]
+    diagonal_slots: NDArray[np.int64]  # data positions of the diagonal, in variable order
+
+    @classmethod
+    def of(cls, layout: Layout) -> _SparsePattern:
+        n, k = layout.n_poses, layout.n_objects
+        dim = POSE_DIM * n + OBJECT_DIM * k
+        a3 = np.arange(POSE_DIM)
+        p = np.arange(n)[:, None, None]
+        diag_r, diag_c = 3 * p + a3[None, :, None], 3 * p + a3[None, None, :]
+        q = np.arange(max(n - 1, 0))[:, None, None]
+        off_r, off_c = 3 * q + a3[None, :, None], 3 * q + 3 + a3[None, None, :]
+        cross_r = POSE_DIM * layout.pose_of[None, None, :] + a3[:, None, None]
+        cross_c = POSE_DIM * n + OBJECT_DIM * layout.object_of[None, None, :] + np.arange(OBJECT_DIM)[None, :, None]
+        cross_r, cross_c = np.broadcast_arrays(cross_r, cross_c)
+        o = np.arange(k)[:, None, None]
+        a5 = np.arange(OBJECT_DIM)
+        obj_r = POSE_DIM * n + OBJECT_DIM * o + a5[None, :, None]
+        obj_c = POSE_DIM * n + OBJECT_DIM * o + a5[None, None, :]
+        obj_r, obj_c = np.broadcast_arrays(obj_r, obj_c)
+        diag_r, diag_c = np.broadcast_arrays(diag_r, diag_c)
+        off_r, off_c = np.broadcast_arrays(off_r, off_c)
+        rows = np.concatenate([x.ravel() for x in (diag_r, off_r, off_c, cross_r, cross_c, obj_r)])
+        cols = np.concatenate([x.ravel() for x in (diag_c, off_c, off_r, cross_c, cross_r, obj_c)])
+        keys, slot = np.unique(cols.astype(np.int64) * dim + rows, return_inverse=True)
+        indices = (keys % dim).astype(np.int32)
+        counts = np.bincount(keys // dim, minlength=dim)
+        indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+        diag_keys = np.arange(dim, dtype=np.int64) * (dim + 1)
+        return cls(dim, indices, indptr, slot, np.searchsorted(keys, diag_keys))
+
+
+def _sparse_values(lin: Linearization) -> NDArray[np.float64]:
+    """Block values in the order of _SparsePattern's entries."""
+    off = lin.pose_off.ravel()
+    cross = lin.cross.ravel()
+    return np.concatenate([lin.pose_diag.ravel(), off, off, cross, cross, lin.object_diag.ravel()])
+
+
+@functools.lru_cache(maxsize=8)
+def _band_index(n_poses: int) -> tuple[tuple[NDArray, NDArray], NDArray, tuple[NDArray, NDArray], NDArray]:
+    """Where the pose blocks go in LAPACK upper banded storage ab[BAND + i - j, j]."""
+    p, a, b = np.meshgrid(np.arange(n_poses), np.arange(3), np.arange(3), indexing="ij")
+    upper = (a <= b).ravel()
+    diag_at = ((_BAND + a - b).ravel()[upper], (3 * p + b).ravel()[upper])
+    diag_src = (9 * p + 3 * a + b).ravel()[upper]
+    p, a, b = np.meshgrid(np.arange(max(n_poses - 1, 0)), np.arange(3), np.arange(3), indexing="ij")
+    off_at = ((_BAND + a - b - 3).ravel(), (3 * p + 3 + b).ravel())
+    off_src = (9 * p + 3 * a + b).ravel()
+    return diag_at, diag_src, off_at, off_src
+
+
+@functools.lru_cache(maxsize=32)
+def _block_diag_index(n_blocks: int, size: int) -> tuple[NDArray, NDArray]:
+    """(row, col) of the entries of n_blocks diagonal size x size blocks, block-major."""
+    k, a, b = np.meshgrid(np.arange(n_blocks), np.arange(size), np.arange(size), indexing="ij")
+    return (size * k + a).ravel(), (size * k + b).ravel()
+
+
+# A slice factor's 8 variables (pose x, y, theta | location x, y, z_base | diameter, height)
+# enter its 4 components through the 6 reduced columns of slice_model.predict_reduced
+# (delta_x, delta_y, theta, z_base, d, H): pose x, y as -delta, location x, y as +delta.
+_POSE_SIGN = np.array([-1.0, -1.0, 1.0])
+_OBJECT_COLUMNS = np.array([0, 1, 3, 4, 5])
+
+
+def _bin_sum(bins: NDArray[np.int64], values: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """Sum ``values`` into a zero array of ``shape`` at the flat positions ``bins`` (same shape as values)."""
+    size = int(np.prod(shape))
+    return np.bincount(bins.ravel(), weights=values.ravel(), minlength=size).reshape(shape)
+
+
+class AssociationSystem:
+    """Residuals and normal equations of one association over a fixed layout."""
+
+    def __init__(self, problem: GraphProblem, layout: Layout, dense_object_limit: int):
+        self.problem = problem
+        self.layout = layout
+        self.dense_object_limit = dense_object_limit
+        self.n_poses = problem.pose_count
+        self.n_objects = len(layout.labels)
+        self.z = np.ascontiguousarray(problem.measurements[layout.measurements].T)  # (4, A)
+        self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[layout.measurements].T)
+        self.inc_inv_sigma = 1.0 / problem.increment_stddev
+        self.prior_mean = problem.prior_mean[layout.labels]
+        self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.labels]
+        self.log_normalizer = (
+            problem.trajectory_log_normalizer
+            + float(np.sum(problem.measurement_log_normalizer[layout.measurements]))
+            + float(np.sum(problem.prior_log_normalizer[layout.labels]))
+        )
+
+    @property
+    def dimension(self) -> int:
+        return POSE_DIM * self.n_poses + OBJECT_DIM * self.n_objects
+
+    def _odometry(self, poses: NDArray) -> tuple[float, NDArray, NDArray, NDArray, NDArray]:
+        """Odometry factors: cost, and their normal-equation blocks in closed form.
+
+        Error ``e = (R_i^T (t_j - t_i) - u_xy, wrap(theta_j - theta_i - u_theta))``, whitened
+        by ``w`` (x, y) and ``w_t`` (theta). With ``d = t_j - t_i`` the Gram blocks are
+        ``Ji^T Ji = w^2 [[1, 0, -d_y], [0, 1, d_x], [-d_y, d_x, |d|^2]] + w_t^2 e3 e3^T``,
+        ``Jj^T Jj = diag(w^2, w^2, w_t^2)``, ``Ji^T Jj = [[-w^2, 0, 0], [0, -w^2, 0],
+        [w^2 d_y, -w^2 d_x, -w_t^2]]``. Returns (cost, diag_i, diag_j, off, grad (N, 3)).
+        """
+        pi, pj = poses[:-1], poses[1:]
+        c, s = np.cos(pi[:, 2]), np.sin(pi[:, 2])
+        dx, dy = pj[:, 0] - pi[:, 0], pj[:, 1] - pi[:, 1]
+        u = self.problem.increments
+        w, wt = self.inc_inv_sigma[:, 0], self.inc_inv_sigma[:, 2]
+        e1 = w * (c * dx + s * dy - u[:, 0])
+        e2 = w * (-s * dx + c * dy - u[:, 1])
+        e3 = wt * wrap_angle(pj[:, 2] - pi[:, 2] - u[:, 2])
+        cost = 0.5 * float(np.sum(e1 * e1) + np.sum(e2 * e2) + np.sum(e3 * e3))
+        w2, wt2 = w * w, wt * wt
+        m = len(pi)
+        diag_i = np.zeros((m, 3, 3))
+        diag_i[:, 0, 0] = diag_i[:, 1, 1] = w2
+        diag_i[:, 0, 2] = diag_i[:, 2, 0] = -w2 * dy
+        diag_i[:, 1, 2] = diag_i[:, 2, 1] = w2 * dx
+        diag_i[:, 2, 2] = w2 * (dx * dx + dy * dy) + wt2
+        diag_j = np.zeros((m, 3, 3))
+        diag_j[:, 0, 0] = diag_j[:, 1, 1] = w2
+        diag_j[:, 2, 2] = wt2
+        off = np.zeros((m, 3, 3))
+        off[:, 0, 0] = off[:, 1, 1] = -w2
+        off[:, 2, 0] = w2 * dy
+        off[:, 2, 1] = -w2 * dx
+        off[:, 2, 2] = -wt2
+        a, b = -s * dx + c * dy, -c * dx - s * dy  # d(R_i^T d)/d theta_i
+        grad = np.zeros((m + 1, 3))
+        grad[:-1, 0] = w * (-c * e1 + s * e2)
+        grad[:-1, 1] = w * (-s * e1 - c * e2)
+        grad[:-1, 2] = w * (a * e1 + b * e2) - wt * e3
+        grad[1:, 0] += w * (c * e1 - s * e2)
+        grad[1:, 1] += w * (s * e1 + c * e2)
+        grad[1:, 2] += wt * e3
+        return cost, diag_i, diag_j, off, grad
+
+    def linearize(self, poses: NDArray, objects: NDArray) -> Linearization:
+        n, k = self.n_poses, self.n_objects
+        lay = self.layout
+        obj = objects[lay.object_of]
+        pred = predict_reduced(poses[lay.pose_of], obj[:, :3], obj[:, 3:], self.problem.mount)
+        if not np.all(pred.valid):
+            return Linearization(cost=np.inf, valid=False)
+        sl = pred.values - self.z
+        sl[BEARING] = wrap_angle(sl[BEARING])
+        sl *= self.inv_sigma
+        jac = pred.jacobian * self.inv_sigma[:, None, :]  # (4, 6, A)
+        jac_pose = jac[:, :3] * _POSE_SIGN[None, :, None]  # (4, 3, A)
+        jac_object = jac[:, _OBJECT_COLUMNS]  # (4, 5, A)
+        odo_cost, diag_i, diag_j, pose_off, grad_pose = self._odometry(poses)
+        first = poses[0] - self.problem.odometry_poses[0]
+        first[2] = wrap_angle(first[2])
+        first /= self.problem.first_pose_stddev
+        pr = (objects - self.prior_mean) * self.prior_inv_sigma
+        cost = odo_cost + 0.5 * float(np.sum(first**2) + np.sum(sl**2) + np.sum(pr**2))
+
+        pose_diag = _bin_sum(lay.pose_bins, np.einsum("kim,kjm->ijm", jac_pose, jac_pose), (n, 3, 3))
+        pose_diag[:-1] += diag_i
+        pose_diag[1:] += diag_j
+        pose_diag[0] += np.diag(self.problem.first_pose_stddev**-2)
+        grad_pose += _bin_sum(lay.pose_grad_bins, np.einsum("kim,km->im", jac_pose, sl), (n, 3))
+        grad_pose[0] += first / self.problem.first_pose_stddev
+
+        # Measurements are grouped by object: per-object sums are contiguous runs.
+        object_diag = np.add.reduceat(np.einsum("kim,kjm->ijm", jac_object, jac_object), lay.starts, axis=2)
+        object_diag = np.ascontiguousarray(object_diag.transpose(2, 0, 1)) if k else np.zeros((0, 5, 5))
+        object_diag[:, np.arange(OBJECT_DIM), np.arange(OBJECT_DIM)] += self.prior_inv_sigma**2
+        grad_object = pr * self.prior_inv_sigma
+        if k:
+            grad_object += np.add.reduceat(np.einsum("kim,km->im", jac_object, sl), lay.starts, axis=1).T
+        cross = np.einsum("kim,kjm->ijm", jac_pose, jac_object)
+        return Linearization(
+            cost, True, grad_pose.ravel(), grad_object.ravel(), pose_diag, pose_off, cross, object_diag
+        )
+
+    def factorize(self, lin: Linearization, damping: float) -> Factorization:
+        """Solve the normal equations, Marquardt-damped (``diag *= 1 + damping``) if asked.
+
+        Raises LinAlgError if the system is not positive definite.
+        """
+        if self.n_objects <= self.dense_object_limit:
+            fac = self._factorize_schur(lin, damping)
+        else:
+            fac = self._factorize_sparse(lin, damping)
+        # Decrease of the quadratic model: 1/2 (-g^T step + damping step^T diag(Lambda) step).
+        predicted = -float(lin.grad_pose @ fac.step_pose + lin.grad_object @ fac.step_object)
+        if damping > 0.0:
+            diag_pose, diag_object = lin.diagonal()
+            predicted += damping * float(diag_pose @ fac.step_pose**2 + diag_object @ fac.step_object**2)
+        fac.predicted_decrease = 0.5 * predicted
+        return fac
+
+    def _factorize_schur(self, lin: Linearization, damping: float) -> Factorization:
+        """Poses first: with A = U^T U, W = U^-T B and w = U^-T g_pose, S = C - W^T W,
+        step_object = S^-1 (W^T w - g_object), step_pose = -U^-1 (w + W step_object)."""
+        n, k = self.n_poses, self.n_objects
+        diag_at, diag_src, off_at, off_src = _band_index(n)
+        pose_diag, object_diag = lin.pose_diag, lin.object_diag
+        if damping > 0.0:
+            pose_diag, object_diag = pose_diag.copy(), object_diag.copy()
+            i3, i5 = np.arange(POSE_DIM), np.arange(OBJECT_DIM)
+            pose_diag[:, i3, i3] *= 1.0 + damping
+            object_diag[:, i5, i5] *= 1.0 + damping
+        band = np.zeros((_BAND + 1, POSE_DIM * n))
+        band[diag_at] = pose_diag.ravel()[diag_src]
+        band[off_at] = lin.pose_off.ravel()[off_src]
+        chol_pose = scipy.linalg.cholesky_banded(band, lower=False, check_finite=False)
+        log_det = 2.0 * float(np.sum(np.log(chol_pose[_BAND])))
+        rhs = np.empty((POSE_DIM * n, OBJECT_DIM * k + 1), order="F")
+        rhs[:, :-1] = lin.pose_object(self.layout)
+        rhs[:, -1] = lin.grad_pose
+        whitened, info = lapack.dtbtrs(chol_pose, rhs, uplo="U", trans="T", overwrite_b=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+        w_cross, w_grad = whitened[:, :-1], whitened[:, -1]
+        chol_schur = None
+        step_object = np.zeros(0)
+        if k:
+            schur = -(w_cross.T @ w_cross)
+            schur[_block_diag_index(k, OBJECT_DIM)] += object_diag.ravel()
+            chol_schur = scipy.linalg.cholesky(schur, lower=False, check_finite=False)
+            log_det += 2.0 * float(np.sum(np.log(np.diag(chol_schur))))
+            step_object = scipy.linalg.cho_solve(
+                (chol_schur, False), w_cross.T @ w_grad - lin.grad_object, check_finite=False
+            )
+        back, info = lapack.dtbtrs(chol_pose, (w_grad + w_cross @ step_object)[:, None], uplo="U", trans="N")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+        return Factorization(log_det, -back[:, 0], step_object, 0.0, chol_schur=chol_schur)
+
+    def _factorize_sparse(self, lin: Linearization, damping: float) -> Factorization:
+        pattern = self.layout.sparse
+        data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices))
+        if damping > 0.0:
+            data[pattern.diagonal_slots] *= 1.0 + damping
+        matrix = scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
+        try:
+            lu = scipy.sparse.linalg.splu(
+                matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+            )
+        except RuntimeError as exc:  # "Factor is exactly singular"
+            raise np.linalg.LinAlgError(str(exc)) from exc
+        pivots = lu.U.diagonal()
+        if np.any(pivots <= 0.0):
+            raise np.linalg.LinAlgError("normal equations are not positive definite")
+        step = lu.solve(-np.concatenate([lin.grad_pose, lin.grad_object]))
+        split = POSE_DIM * self.n_poses
+        return Factorization(float(np.sum(np.log(pivots))), step[:split], step[split:], 0.0, sparse_lu=lu)
+
+    def object_covariance(self, fac: Factorization) -> NDArray[np.float64]:
+        """(K, 5, 5) marginal covariance blocks of the objects (undamped factorization)."""
+        k = self.n_objects
+        if not k:
+            return np.zeros((0, OBJECT_DIM, OBJECT_DIM))
+        if fac.chol_schur is not None:
+            inv = scipy.linalg.cho_solve((fac.chol_schur, False), np.eye(OBJECT_DIM * k), check_finite=False)
+        else:
+            split = POSE_DIM * self.n_poses
+            unit = np.zeros((split + OBJECT_DIM * k, OBJECT_DIM * k))
+            unit[split:] = np.eye(OBJECT_DIM * k)
+            inv = fac.sparse_lu.solve(unit)[split:]
+        blocks = inv.reshape(k, OBJECT_DIM, k, OBJECT_DIM)
+        return blocks[np.arange(k), :, np.arange(k), :]

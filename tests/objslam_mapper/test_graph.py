@@ -1,0 +1,497 @@
+"""Factor graph of a known association: problem building, MAP, marginals, Laplace evidence.
+
+Data come from objslam_mapper.synthetic (the model itself plus known noise), so the truth
+behind every measurement is known.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gtsam
+import numpy as np
+import pytest
+from scipy.special import logsumexp
+from scipy.stats import chi2
+
+from objslam_mapper.catalog import load_catalog
+from objslam_mapper.geometry import between, wrap_angle
+from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
+from objslam_mapper.initialization import initial_object
+from objslam_mapper.problem import GraphError, build_problem
+from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
+from objslam_mapper.slice_model import predict_slices, slice_error
+from objslam_mapper.solver import solve
+from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
+
+CATALOG = load_catalog()
+CONFIG = GraphConfig()
+MOUNT = CONFIG.camera_mount.to_mount()
+STEP_NS = 250_000_000
+SCENE = (
+    SyntheticObject("red", (2.2, 0.3, 0.0), (0.31, 0.58)),
+    SyntheticObject("green", (-0.5, 1.0, 0.0), (0.41, 0.39)),
+    SyntheticObject("cyan", (0.4, -0.9, 0.75), (0.15, 0.26)),
+    SyntheticObject("blue", (-2.0, -0.5, 0.0), (0.2, 0.92)),
+    SyntheticObject("yellow", (0.5, 2.4, 0.0), (0.5, 0.3)),
+)
+
+
+# Both ways of solving the linear systems: dense Schur complement (few objects), sparse LU.
+SOLVERS = pytest.mark.parametrize("dense_object_limit", [40, 0], ids=["schur", "sparse"])
+
+
+def with_limit(config, dense_object_limit):
+    return dataclasses.replace(config, solver=dataclasses.replace(config.solver, dense_object_limit=dense_object_limit))
+
+
+def make_run(seed, scene=SCENE, n_poses=60, config=CONFIG, solve_config=None, **kwargs):
+    poses = ellipse_trajectory(n_poses, (3.0, 1.8))
+    stamps = [k * STEP_NS for k in range(n_poses)]
+    run = simulate_run(poses, stamps, scene, CATALOG, np.random.default_rng(seed), config=config, **kwargs)
+    problem = build_problem(run.odometry, run.images, MOUNT, CATALOG, solve_config or config)
+    return run, problem
+
+
+def draw_scene(rng):
+    """SCENE with base heights and sizes drawn from the class priors (for consistency tests)."""
+    objects = []
+    for obj in SCENE:
+        cls = CATALOG[obj.label]
+        size = rng.normal(cls.size_mean, [cls.diameter_stddev_m, cls.height_stddev_m])
+        z_base = rng.normal(cls.z_base_m, cls.z_base_stddev_m)
+        objects.append(SyntheticObject(obj.label, (obj.location_m[0], obj.location_m[1], z_base), tuple(size)))
+    return tuple(objects)
+
+
+# -- an independent evaluation of the model, for checking the solver's bookkeeping -------------
+
+
+def state_vector(solution):
+    objects = [np.r_[o.location_m, o.size_m] for o in solution.objects]
+    return np.concatenate([np.ravel(solution.map_T_base), *objects])
+
+
+def whitened_residuals(problem, groups, theta):
+    """All whitened residuals of the graph at theta = (poses, objects), written out plainly."""
+    n = problem.pose_count
+    poses, objects = theta[: 3 * n].reshape(n, 3), theta[3 * n :].reshape(-1, 5)
+    out = []
+    for i in range(n - 1):
+        err = between(poses[i], poses[i + 1]) - problem.increments[i]
+        err[2] = wrap_angle(err[2])
+        out.append(err / problem.increment_stddev[i])
+    err = poses[0] - problem.odometry_poses[0]
+    err[2] = wrap_angle(err[2])
+    out.append(err / problem.first_pose_stddev)
+    for j, group in enumerate(groups):
+        group = np.asarray(group)
+        pred = predict_slices(poses[problem.measurement_pose[group]], objects[j, :3], objects[j, 3:], MOUNT)
+        out.append((slice_error(pred.values, problem.measurements[group]) / problem.measurement_stddev[group]).ravel())
+        label = problem.measurement_label[group[0]]
+        out.append((objects[j] - problem.prior_mean[label]) / problem.prior_stddev[label])
+    return np.concatenate(out)
+
+
+def log_normalizers(problem, groups):
+    """Sum of -1/2 log|2 pi Sigma| over every factor, from the noise standard deviations."""
+    sigmas = [problem.increment_stddev.ravel(), problem.first_pose_stddev]
+    for group in groups:
+        group = np.asarray(group)
+        sigmas.append(problem.measurement_stddev[group].ravel())
+        sigmas.append(problem.prior_stddev[problem.measurement_label[group[0]]])
+    sigmas = np.concatenate(sigmas)
+    return float(np.sum(-0.5 * np.log(2 * np.pi * sigmas**2)))
+
+
+def dense_information(problem, groups, theta, step=1e-6):
+    columns = []
+    for k in range(len(theta)):
+        plus, minus = theta.copy(), theta.copy()
+        plus[k] += step
+        minus[k] -= step
+        columns.append(
+            (whitened_residuals(problem, groups, plus) - whitened_residuals(problem, groups, minus)) / (2 * step)
+        )
+    jacobian = np.stack(columns, axis=1)
+    return jacobian.T @ jacobian
+
+
+# -- problem building ------------------------------------------------------------------------
+
+
+def test_measurements_are_indexed_in_image_then_slice_order():
+    odom = [OdometrySample(0, 0.0, 0.0, 0.0), OdometrySample(10, 1.0, 0.0, 0.0)]
+
+    def sl(label, bearing):
+        return SliceMeasurement(label, 0.9, bearing, 0.1, -0.2, 0.1)
+
+    images = [
+        ImageSlices(8, (sl("red", 0.3), sl("nope", 0.0), sl("green", 0.4))),
+        ImageSlices(2, (sl("blue", 0.1),)),
+        ImageSlices(20, (sl("red", 0.5),)),  # after the odometry ends
+        ImageSlices(5, ()),
+    ]
+    problem = build_problem(odom, images, MOUNT, CATALOG, CONFIG)
+    assert problem.stamps_ns.tolist() == [2, 5, 8]
+    assert problem.pose_image.tolist() == [1, 3, 0]
+    assert problem.rejected_image_count == 1
+    assert problem.rejected_slice_count == 1
+    assert [problem.label_of(m) for m in range(problem.measurement_count)] == ["blue", "red", "green"]
+    assert problem.measurement_pose.tolist() == [0, 2, 2]
+    assert problem.measurement_image.tolist() == [1, 0, 0]
+    assert problem.measurement_slot.tolist() == [0, 0, 2]
+    np.testing.assert_allclose(problem.odometry_poses[:, 0], [0.2, 0.5, 0.8])
+    with pytest.raises(ValueError):
+        problem.measurements[0, 0] = 1.0  # read-only
+
+
+def test_no_image_inside_the_odometry_span_is_an_error():
+    with pytest.raises(GraphError, match="odometry span"):
+        build_problem([OdometrySample(0, 0.0, 0.0, 0.0)], [ImageSlices(5, ())], MOUNT, CATALOG, CONFIG)
+
+
+def test_raised_classes_get_a_wide_lower_edge_noise():
+    _, problem = make_run(0, n_poses=10)
+    cyan = problem.measurement_label == problem.labels.index("cyan")
+    assert np.all(problem.measurement_stddev[cyan, 2] == CONFIG.slice_noise.raised_elevation_bottom_stddev_rad)
+    assert np.all(problem.measurement_stddev[~cyan, 2] == CONFIG.slice_noise.elevation_bottom_stddev_rad)
+
+
+def test_low_confidence_slices_get_inflated_noise():
+    odom = [OdometrySample(0, 0.0, 0.0, 0.0), OdometrySample(10, 1.0, 0.0, 0.0)]
+    sure, cut = (SliceMeasurement("red", c, 0.3, 0.1, -0.2, 0.1) for c in (0.9, 0.45))
+    problem = build_problem(odom, [ImageSlices(5, (sure, cut))], MOUNT, CATALOG, CONFIG)
+    scale = CONFIG.slice_noise.low_confidence_stddev_scale
+    np.testing.assert_allclose(problem.measurement_stddev[1], scale * problem.measurement_stddev[0])
+
+
+@pytest.mark.parametrize(
+    "groups, message",
+    [
+        ([[0, 1], [1]], "more than one object"),
+        ([[]], "at least one"),
+        ([[10**6]], "must lie in"),
+    ],
+)
+def test_invalid_groups_are_refused(groups, message):
+    _, problem = make_run(0, n_poses=10)
+    with pytest.raises(GraphError, match=message):
+        solve(problem, groups)
+
+
+def test_a_group_mixing_classes_is_refused():
+    run, problem = make_run(0, n_poses=10)
+    groups = run.groups(problem)
+    with pytest.raises(GraphError, match="mixes classes"):
+        solve(problem, [groups[0] + groups[1]])
+
+
+def test_graph_config_reads_its_sections_of_the_mapper_file(repo_root, tmp_path):
+    assert load_graph_config(repo_root / "config" / "mapper.yaml") == GraphConfig()
+    custom = tmp_path / "mapper.yaml"
+    custom.write_text(
+        "mapper:\n  ros__parameters:\n    sampler: {samples: 3}\n    slice_noise.bearing_stddev_rad: 0.02\n"
+    )
+    assert load_graph_config(custom).slice_noise.bearing_stddev_rad == 0.02
+
+
+# -- MAP -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_exact_slices_recover_the_truth_despite_perturbed_odometry(seed):
+    # Odometry drifts by metres; with odometry trusted little the exact slices must win.
+    drifting = dataclasses.replace(
+        CONFIG, odometry=OdometryNoiseConfig(xy_stddev_per_sqrt_m=0.1, theta_stddev_per_sqrt_m=0.05)
+    )
+    loose = dataclasses.replace(
+        CONFIG,
+        odometry=OdometryNoiseConfig(
+            xy_stddev_per_sqrt_m=2.0,
+            xy_stddev_per_sqrt_rad=2.0,
+            theta_stddev_per_sqrt_m=2.0,
+            theta_stddev_per_sqrt_rad=2.0,
+        ),
+    )
+    run, problem = make_run(seed, config=drifting, solve_config=loose, slice_noise_scale=0.0)
+    odometry_error = np.hypot(*(problem.odometry_poses[:, :2] - run.true_map_T_base[:, :2]).T).max()
+    assert odometry_error > 0.3
+    solution = solve(problem, run.groups(problem))
+    assert solution.converged
+    np.testing.assert_allclose(solution.map_T_base[:, :2], run.true_map_T_base[:, :2], atol=0.015)
+    np.testing.assert_allclose(wrap_angle(solution.map_T_base[:, 2] - run.true_map_T_base[:, 2]), 0.0, atol=0.003)
+    for j, obj in zip(run.seen_objects(), solution.objects, strict=True):
+        truth = run.objects[j]
+        assert obj.label == truth.label
+        np.testing.assert_allclose(obj.location_m, truth.location_m, atol=0.015)
+        # The size prior (catalog nominal) pulls a little: true sizes are off nominal by up to 4 %.
+        np.testing.assert_allclose(obj.size_m, truth.size_m, atol=0.01)
+
+
+def test_object_positions_are_consistent_nees():
+    nees = []
+    for seed in range(6):
+        rng = np.random.default_rng(100 + seed)
+        scene = draw_scene(rng)
+        poses = ellipse_trajectory(60, (3.0, 1.8))
+        run = simulate_run(poses, [k * STEP_NS for k in range(60)], scene, CATALOG, rng, config=CONFIG)
+        problem = build_problem(run.odometry, run.images, MOUNT, CATALOG, CONFIG)
+        solution = solve(problem, run.groups(problem), with_covariances=True)
+        assert solution.converged
+        for j, obj in zip(run.seen_objects(), solution.objects, strict=True):
+            error = obj.location_m - np.array(run.objects[j].location_m)
+            nees.append(error @ np.linalg.solve(obj.location_cov, error))
+    count = len(nees)
+    low, high = chi2.ppf([0.025, 0.975], 3 * count) / count
+    assert low < np.mean(nees) < high, (np.mean(nees), low, high)
+
+
+def test_an_object_seen_once_is_well_posed():
+    run, problem = make_run(2, n_poses=40)
+    single = [run.groups(problem)[0][5]]
+    solution = solve(problem, [single], with_covariances=True)
+    assert solution.converged
+    obj = solution.objects[0]
+    assert np.all(np.isfinite(obj.location_cov)) and np.all(np.linalg.eigvalsh(obj.location_cov) > 0)
+    # One sighting gives range from apparent size: far better than the 100 m prior, but metres-ish.
+    assert np.sqrt(np.linalg.eigvalsh(obj.location_cov).max()) < 1.0
+    assert np.isfinite(solution.log_evidence)
+    truth = run.objects[run.seen_objects()[0]]
+    assert np.hypot(*(obj.location_m[:2] - truth.location_m[:2])) < 0.3
+
+
+@SOLVERS
+def test_warm_start_converges_to_the_same_solution_faster(dense_object_limit):
+    run, problem = make_run(3, solve_config=with_limit(CONFIG, dense_object_limit))
+    groups = run.groups(problem)
+    cold = solve(problem, groups)
+    warm = solve(problem, groups, warm_start=cold)
+    assert warm.iterations == 1 and warm.converged
+    assert warm.log_evidence == pytest.approx(cold.log_evidence, abs=1e-3)
+    # A split starts both parts from the parent; merging back starts from the larger part.
+    first = np.asarray(groups[0])
+    split = [first[::2], first[1::2], *groups[1:]]
+    parts = solve(problem, split, warm_start=cold)
+    merged = solve(problem, groups, warm_start=parts)
+    assert merged.log_evidence == pytest.approx(cold.log_evidence, abs=1e-2)
+
+
+def test_a_warm_start_with_a_pose_inside_an_object_still_solves():
+    run, problem = make_run(3)
+    groups = run.groups(problem)
+    cold = solve(problem, groups)
+    # Move the first object onto a pose that saw it: the model is undefined there.
+    first = cold.objects[0]
+    seen_from = cold.map_T_base[problem.measurement_pose[first.measurement_indices[0]]]
+    moved = dataclasses.replace(first, location_m=np.r_[seen_from[:2], first.location_m[2]])
+    bad = dataclasses.replace(cold, objects=(moved, *cold.objects[1:]))
+    again = solve(problem, groups, warm_start=bad)
+    assert again.converged
+    assert again.log_evidence == pytest.approx(cold.log_evidence, abs=1e-2)
+
+
+def test_initial_object_is_near_the_truth():
+    run, problem = make_run(4)
+    for j, group in zip(run.seen_objects(), run.groups(problem), strict=True):
+        guess = initial_object(problem, group, run.true_map_T_base)
+        assert np.hypot(*(guess[:2] - run.objects[j].location_m[:2])) < 0.1
+
+
+# -- evidence --------------------------------------------------------------------------------
+
+
+@SOLVERS
+def test_laplace_evidence_matches_an_independent_dense_computation(dense_object_limit):
+    run, problem = make_run(5, scene=SCENE[:2], n_poses=8)
+    # One image sees the first object twice (a blob split in two), both assigned to it.
+    images = list(run.images)
+    images[3] = ImageSlices(images[3].stamp_ns, (*images[3].slices, images[3].slices[0]))
+    problem = build_problem(run.odometry, images, MOUNT, CATALOG, with_limit(CONFIG, dense_object_limit))
+    groups = [[m for m in range(problem.measurement_count) if problem.label_of(m) == obj.label] for obj in SCENE[:2]]
+    twice = [g for g in groups if len(set(problem.measurement_pose[g])) < len(g)]
+    assert len(twice) == 1
+    solution = solve(problem, groups, with_covariances=True)
+    theta = state_vector(solution)
+    residual = whitened_residuals(problem, groups, theta)
+    info = dense_information(problem, groups, theta)
+    sign, log_det = np.linalg.slogdet(info)
+    assert sign > 0
+    expected = -0.5 * residual @ residual + log_normalizers(problem, groups) + 0.5 * len(theta) * np.log(2 * np.pi)
+    expected -= 0.5 * log_det
+    assert solution.chi2 == pytest.approx(residual @ residual, rel=1e-9)
+    assert solution.log_det_information == pytest.approx(log_det, abs=1e-4)
+    assert solution.log_evidence == pytest.approx(expected, abs=1e-4)
+    # Marginal covariances are the blocks of the inverse information.
+    cov = np.linalg.inv(info)
+    n = 3 * problem.pose_count
+    np.testing.assert_allclose(solution.objects[1].location_cov, cov[n + 5 : n + 8, n + 5 : n + 8], rtol=1e-4)
+    np.testing.assert_allclose(solution.objects[0].size_cov, cov[n + 3 : n + 5, n + 3 : n + 5], rtol=1e-4)
+
+
+def batch_log_joint(problem, groups, thetas):
+    """log p(Z, theta) of many states (S, d) at once: the plain formulas of whitened_residuals."""
+    n = problem.pose_count
+    poses, objects = thetas[:, : 3 * n].reshape(-1, n, 3), thetas[:, 3 * n :].reshape(len(thetas), -1, 5)
+    c, s = np.cos(poses[:, :-1, 2]), np.sin(poses[:, :-1, 2])
+    d = poses[:, 1:, :2] - poses[:, :-1, :2]
+    odo = np.stack(
+        [c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], poses[:, 1:, 2] - poses[:, :-1, 2]], -1
+    )
+    odo = odo - problem.increments
+    odo[..., 2] = wrap_angle(odo[..., 2])
+    total = np.sum((odo / problem.increment_stddev) ** 2, axis=(1, 2))
+    first = poses[:, 0] - problem.odometry_poses[0]
+    first[:, 2] = wrap_angle(first[:, 2])
+    total += np.sum((first / problem.first_pose_stddev) ** 2, axis=1)
+    for j, group in enumerate(groups):
+        group = np.asarray(group)
+        at = poses[:, problem.measurement_pose[group]].reshape(-1, 3)
+        obj = np.repeat(objects[:, j], len(group), axis=0)
+        pred = predict_slices(at, obj[:, :3], obj[:, 3:], MOUNT, jacobians=False).values
+        err = slice_error(pred, np.tile(problem.measurements[group], (len(thetas), 1)))
+        err /= np.tile(problem.measurement_stddev[group], (len(thetas), 1))
+        total += np.sum(err.reshape(len(thetas), -1) ** 2, axis=1)
+        label = problem.measurement_label[group[0]]
+        total += np.sum(((objects[:, j] - problem.prior_mean[label]) / problem.prior_stddev[label]) ** 2, axis=1)
+    return log_normalizers(problem, groups) - 0.5 * total
+
+
+def test_laplace_evidence_matches_importance_sampling():
+    """The marginal likelihood itself, integrated numerically over poses and the object."""
+    run, problem = make_run(6, scene=SCENE[1:2], n_poses=6)
+    groups = run.groups(problem)
+    solution = solve(problem, groups)
+    theta = state_vector(solution)
+    cov = np.linalg.inv(dense_information(problem, groups, theta))
+    single = batch_log_joint(problem, groups, theta[None, :])[0]
+    assert single == pytest.approx(log_normalizers(problem, groups) - 0.5 * solution.chi2, abs=1e-9)
+    rng = np.random.default_rng(0)
+    samples = rng.multivariate_normal(theta, cov, size=40000)
+    centred = samples - theta
+    log_q = -0.5 * np.einsum("si,ij,sj->s", centred, np.linalg.inv(cov), centred)
+    log_q -= 0.5 * np.linalg.slogdet(2 * np.pi * cov)[1]
+    log_weights = batch_log_joint(problem, groups, samples) - log_q
+    estimate = logsumexp(log_weights) - np.log(len(samples))
+    weights = np.exp(log_weights - log_weights.max())
+    standard_error = np.std(weights) / np.mean(weights) / np.sqrt(len(samples))
+    assert standard_error < 0.01
+    assert solution.log_evidence == pytest.approx(estimate, abs=0.03)
+
+
+def test_evidence_prefers_the_true_number_of_objects():
+    run, problem = make_run(7)
+    groups = [np.asarray(g) for g in run.groups(problem)]
+    truth = solve(problem, groups)
+    # One object cut in two (first and second half of its sightings) pays the Occam price.
+    first = groups[0]
+    cut = solve(problem, [first[: len(first) // 2], first[len(first) // 2 :], *groups[1:]], warm_start=truth)
+    assert truth.log_evidence > cut.log_evidence + 5
+    # Two real objects of one class glued into one cannot fit their slices.
+    twin = (*SCENE, SyntheticObject("red", (-1.5, 1.9, 0.0), (0.3, 0.6)))
+    run2, problem2 = make_run(7, scene=twin)
+    groups2 = [np.asarray(g) for g in run2.groups(problem2)]
+    reds = [k for k, j in enumerate(run2.seen_objects()) if run2.objects[j].label == "red"]
+    separate = solve(problem2, groups2)
+    glued_groups = [np.concatenate([groups2[k] for k in reds])] + [g for k, g in enumerate(groups2) if k not in reds]
+    glued = solve(problem2, glued_groups, warm_start=separate)
+    assert separate.log_evidence > glued.log_evidence + 100
+
+
+# -- the same problem in GTSAM -----------------------------------------------------------------
+
+
+def _gtsam_graph(problem, groups):
+    """The graph as GTSAM CustomFactors (Pose2 poses, Vector5 objects), with the same residuals."""
+    n = problem.pose_count
+    graph = gtsam.NonlinearFactorGraph()
+    unit = gtsam.noiseModel.Unit
+
+    def pose_chart(theta):  # d world (x, y, theta) / d Pose2 local coordinates
+        chart = np.eye(3)
+        chart[:2, :2] = [[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]]
+        return chart
+
+    def odometry(i):
+        def error(this, values, jacobians):
+            a, b = values.atPose2(i), values.atPose2(i + 1)
+            pa, pb = np.array([a.x(), a.y(), a.theta()]), np.array([b.x(), b.y(), b.theta()])
+            c, s = np.cos(pa[2]), np.sin(pa[2])
+            d = pb[:2] - pa[:2]
+            err = np.r_[
+                between(pa, pb)[:2] - problem.increments[i, :2], wrap_angle(pb[2] - pa[2] - problem.increments[i, 2])
+            ]
+            w = 1.0 / problem.increment_stddev[i]
+            if jacobians is not None:
+                ja = np.array([[-c, -s, -s * d[0] + c * d[1]], [s, -c, -c * d[0] - s * d[1]], [0, 0, -1]])
+                jb = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+                jacobians[0] = (w[:, None] * ja) @ pose_chart(pa[2])
+                jacobians[1] = (w[:, None] * jb) @ pose_chart(pb[2])
+            return w * err
+
+        return gtsam.CustomFactor(unit.Create(3), [i, i + 1], error)
+
+    def first_pose(this, values, jacobians):
+        p = values.atPose2(0)
+        err = np.array([p.x(), p.y(), p.theta()]) - problem.odometry_poses[0]
+        err[2] = wrap_angle(err[2])
+        if jacobians is not None:
+            jacobians[0] = np.diag(1 / problem.first_pose_stddev) @ pose_chart(p.theta())
+        return err / problem.first_pose_stddev
+
+    graph.add(gtsam.CustomFactor(unit.Create(3), [0], first_pose))
+    for i in range(n - 1):
+        graph.add(odometry(i))
+    for j, group in enumerate(groups):
+        key = n + j
+        label = problem.measurement_label[group[0]]
+        graph.add(
+            gtsam.PriorFactorVector(
+                key, problem.prior_mean[label], gtsam.noiseModel.Diagonal.Sigmas(problem.prior_stddev[label])
+            )
+        )
+        for m in group:
+            i = int(problem.measurement_pose[m])
+
+            def slice_factor(this, values, jacobians, m=m, i=i, key=key):
+                p, o = values.atPose2(i), values.atVector(key)
+                pose = np.array([p.x(), p.y(), p.theta()])
+                pred = predict_slices(pose, o[:3], o[3:], MOUNT)
+                w = 1.0 / problem.measurement_stddev[m]
+                if jacobians is not None:
+                    jacobians[0] = (w[:, None] * pred.d_pose[0]) @ pose_chart(pose[2])
+                    jacobians[1] = w[:, None] * np.hstack([pred.d_location[0], pred.d_size[0]])
+                return w * slice_error(pred.values, problem.measurements[m])[0]
+
+            graph.add(gtsam.CustomFactor(unit.Create(4), [i, key], slice_factor))
+    return graph
+
+
+@SOLVERS
+def test_same_map_and_information_as_gtsam(dense_object_limit):
+    solver = SolverConfig(absolute_tolerance=1e-12, dense_object_limit=dense_object_limit)
+    tight = dataclasses.replace(CONFIG, solver=solver)
+    run, problem = make_run(8, scene=SCENE[:3], n_poses=15, config=tight)
+    groups = run.groups(problem)
+    ours = solve(problem, groups)
+    graph = _gtsam_graph(problem, groups)
+    initial = gtsam.Values()
+    for i, pose in enumerate(problem.odometry_poses):
+        initial.insert(i, gtsam.Pose2(*pose))
+    for j, group in enumerate(groups):
+        initial.insert(problem.pose_count + j, initial_object(problem, group, problem.odometry_poses))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-12)
+    params.setAbsoluteErrorTol(1e-12)
+    result = gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
+    theirs = np.array(
+        [[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(problem.pose_count)]
+    )
+    np.testing.assert_allclose(ours.map_T_base, theirs, atol=1e-7)
+    for j, obj in enumerate(ours.objects):
+        np.testing.assert_allclose(
+            np.r_[obj.location_m, obj.size_m], result.atVector(problem.pose_count + j), atol=1e-7
+        )
+    assert ours.chi2 == pytest.approx(2 * graph.error(result), rel=1e-9)
+    log_det_r = graph.linearize(result).eliminateMultifrontal().logDeterminant()
+    assert ours.log_det_information == pytest.approx(2 * log_det_r, abs=1e-5)
