@@ -30,72 +30,102 @@ _TWO_PI = 2.0 * math.pi
 # Rim extremes are fitted over this central part of the width, from at least this many columns.
 _CENTRAL_FRACTION = 0.6
 _MIN_FIT_COLUMNS = 4
-_NEIGHBOURS = np.array([-2, -1, 0, 1])
+_OUTSIDE_IN = np.array([-2, -1, 0, 1])  # samples around an edge, from two outside to the second inside
 
 
 def chroma(rgb: NDArray[np.uint8]) -> NDArray[np.float32]:
     return rgb.max(axis=-1).astype(np.float32) - rgb.min(axis=-1).astype(np.float32)
 
 
-def refine_rising_edges(profiles: NDArray[np.float32], first: NDArray[np.intp]) -> NDArray[np.float64]:
-    """Sub-pixel edge coordinates (pixel k spans [k, k + 1]) where each profile rises into the object.
+def crossing_offsets(values: NDArray[np.float32]) -> NDArray[np.float64]:
+    """Sub-pixel edge positions from (N, 4) chroma samples ordered from outside to inside.
 
-    ``first`` is the first object pixel of each profile; profiles need two pixels of
-    background before it and one object pixel after it. Falls back to ``first`` where
-    the contrast is too low, and never moves an edge by more than one pixel.
+    The samples are two background pixels, then the first two object pixels. The edge
+    is where the chroma crosses halfway between background and object, measured in
+    pixels from the outer boundary of the first object pixel (negative: further out).
+    Where the contrast is too low it stays on that boundary; it never moves by more than
+    one pixel.
     """
-    outside, a, b, c = np.take_along_axis(profiles, first[:, None] + _NEIGHBOURS, axis=1).T
+    outside, a, b, c = values.T
     inside = np.maximum(b, c)
     half = 0.5 * (inside + outside)
     rising = b >= half
-    # Crossing between the centres of first - 1 and first, or of first and first + 1.
+    # Crossing between the centres of the last background and first object pixel, or of the first two object pixels.
     low = np.where(rising, a, b)
     high = np.where(rising, b, c)
     step = high - low
     usable = (inside - outside >= _MIN_CONTRAST) & (step > 0)
-    fraction = (half - low) / np.where(usable, step, 1.0)
-    edge = first + np.where(rising, -0.5, 0.5) + fraction
-    return np.minimum(np.maximum(np.where(usable, edge, first), first - 1.0), first + 1.0)
+    offset = np.where(rising, -0.5, 0.5) + (half - low) / np.where(usable, step, 1.0)
+    return np.minimum(np.maximum(np.where(usable, offset, 0.0), -1.0), 1.0)
 
 
-def _side_edges(chroma_roi: NDArray[np.float32], own: NDArray[np.bool_]) -> tuple[float, float]:
-    """Mean left and right edge columns over the rows where the blob is (nearly) widest."""
-    present = own.any(axis=1)
-    cols = own.shape[1]
-    first = np.argmax(own, axis=1)
-    last = cols - 1 - np.argmax(own[:, ::-1], axis=1)
-    width = np.where(present, last - first + 1, 0)
-    full = width >= width.max() - 1
-    left = refine_rising_edges(chroma_roi[full], first[full])
-    right = cols - refine_rising_edges(chroma_roi[full, ::-1], cols - 1 - last[full])
-    return float(np.mean(left)), float(np.mean(right))
+def silhouette_edges(chroma_roi: NDArray[np.float32], own: NDArray[np.bool_]) -> tuple[float, float, float, float]:
+    """Left, right, top, bottom edges (ROI pixel-boundary coordinates) of a blob with a margin of background.
 
-
-def _outermost(profiles: NDArray[np.float32], mask: NDArray[np.bool_], left: float, right: float) -> float:
-    """Outermost edge of a rim, as a row counted from the profiles' outer end (columns are profiles).
-
-    A rim's extreme lies at the silhouette's centre column (rims of the object itself) or at
-    its side edges (the rim of a wider table in front). Single columns are dithered by
-    the image's pixel grid, so the extreme of a quadratic fitted to the central columns'
-    refined edges is used rather than the most extreme column.
+    Left and right are means over the rows where the blob is (nearly) widest; top and
+    bottom come from the central columns (``_extreme``). All samples are gathered at
+    once: blobs are small and numerous, so the number of array operations is what costs.
     """
-    present = mask.any(axis=1)
-    first = np.argmax(mask, axis=1)
-    binary = float(first[present].min())
-    columns = np.arange(len(first)) + 0.5
+    n_rows, n_cols = own.shape
+    rows_present = own.any(axis=1)
+    cols_present = own.any(axis=0)
+    first = np.argmax(own, axis=1)
+    last = n_cols - 1 - np.argmax(own[:, ::-1], axis=1)
+    top = np.argmax(own, axis=0)
+    bottom = n_rows - 1 - np.argmax(own[::-1, :], axis=0)
+    width = np.where(rows_present, last - first + 1, 0)
+    full = np.flatnonzero(width >= width.max() - 1)
+    cols = np.flatnonzero(cols_present)
+    steps = _OUTSIDE_IN
+    gather_rows = np.concatenate(
+        [
+            np.repeat(full, 4),
+            np.repeat(full, 4),
+            (top[cols, None] + steps).ravel(),
+            (bottom[cols, None] - steps).ravel(),
+        ]
+    )
+    gather_cols = np.concatenate(
+        [
+            (first[full, None] + steps).ravel(),
+            (last[full, None] - steps).ravel(),
+            np.repeat(cols, 4),
+            np.repeat(cols, 4),
+        ]
+    )
+    offsets = crossing_offsets(chroma_roi[gather_rows, gather_cols].reshape(-1, 4))
+    n_full, n_cols_present = len(full), len(cols)
+    left_off, right_off, top_off, bottom_off = np.split(offsets, np.cumsum([n_full, n_full, n_cols_present]))
+    left = float(np.mean(first[full] + left_off))
+    right = float(np.mean(last[full] + 1 - right_off))
+    column_centres = cols + 0.5
+    top_edge = _extreme(column_centres, top[cols] + top_off, float(top[cols].min()), left, right)
+    lowest = -float(bottom[cols].max() + 1)
+    bottom_edge = -_extreme(column_centres, -(bottom[cols] + 1 - bottom_off), lowest, left, right)
+    return left, right, top_edge, bottom_edge
+
+
+def _extreme(
+    columns: NDArray[np.float64], edge: NDArray[np.float64], binary: float, left: float, right: float
+) -> float:
+    """Smallest value of a rim's edge over the silhouette's width (rows grow outwards-negative).
+
+    A rim's extreme lies at the silhouette's centre column (rims of the object itself) or
+    at its side edges (the rim of a wider table in front). Single columns are dithered by
+    the image's pixel grid, so the extreme of a quadratic fitted to the central columns
+    is used rather than the most extreme column.
+    """
     centre, half = 0.5 * (left + right), 0.5 * (right - left)
-    central = present & (np.abs(columns - centre) <= _CENTRAL_FRACTION * half)
+    central = np.abs(columns - centre) <= _CENTRAL_FRACTION * half
     if np.count_nonzero(central) < _MIN_FIT_COLUMNS:
-        return float(refine_rising_edges(profiles[present], first[present]).min())
-    x = columns[central] - centre
-    edges = refine_rising_edges(profiles[central], first[central])
-    c0, c1, c2 = _quadratic_fit(x, edges)
+        return float(edge.min())
+    c0, c1, c2 = _quadratic_fit(columns[central] - centre, edge[central])
     candidates = [-half, half]
     if c2 > 0 and abs(c1) < 2.0 * c2 * half:
         candidates.append(-c1 / (2.0 * c2))
     extreme = min(c0 + c1 * v + c2 * v * v for v in candidates)
     # A fit gone wild (a blob of odd shape) must not move the edge far from the pixels.
-    return float(np.clip(extreme, binary - 1.0, binary + 1.0))
+    return min(max(extreme, binary - 1.0), binary + 1.0)
 
 
 def _quadratic_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, float, float]:
@@ -108,16 +138,6 @@ def _quadratic_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[floa
     except np.linalg.LinAlgError:
         return float(np.mean(y)), 0.0, 0.0
     return float(c0), float(c1), float(c2)
-
-
-def _extreme_edges(
-    chroma_roi: NDArray[np.float32], own: NDArray[np.bool_], left: float, right: float
-) -> tuple[float, float]:
-    """Top and bottom edge rows (ROI coordinates) of the blob."""
-    rows = own.shape[0]
-    top = _outermost(chroma_roi.T, own.T, left, right)
-    bottom = rows - _outermost(chroma_roi.T[:, ::-1], own.T[:, ::-1], left, right)
-    return top, bottom
 
 
 def image_angle(camera: UnifiedCamera, azimuth_rad: float) -> float:
@@ -140,11 +160,12 @@ def measure(
     own = np.zeros((row_hi - row_lo, blob.cols + 2 * m), dtype=bool)
     own[blob.row0 - row_lo : blob.row0 - row_lo + blob.rows, m : m + blob.cols] = blob.mask
     roi = chroma(strip(rgb_panorama, slice(row_lo, row_hi), blob.col0 - m, blob.col0 + blob.cols + m))
-    left, right = _side_edges(roi, own)
-    if blob.row0 - row_lo >= 2 and row_hi - (blob.row0 + blob.rows) >= 2:
-        top, bottom = _extreme_edges(roi, own, left, right)
-    else:  # at the panorama's top or bottom: no background to refine against
-        top, bottom = blob.row0 - row_lo, blob.row0 - row_lo + blob.rows
+    if blob.row0 - row_lo < 2 or row_hi - (blob.row0 + blob.rows) < 2:
+        # At the panorama's top or bottom there is no background to refine against: pad with none.
+        roi = np.pad(roi, ((2, 2), (0, 0)))
+        own = np.pad(own, ((2, 2), (0, 0)))
+        row_lo -= 2
+    left, right, top, bottom = silhouette_edges(roi, own)
     az_start = float(wrap_angle(pano.column_azimuth(blob.col0 - m + left)))
     width = (right - left) * pano.azimuth_step_rad
     el_top = float(pano.row_elevation(row_lo + top))

@@ -1,0 +1,60 @@
+"""The mapper's input buffers: bounds, time jumps, and what is missing before a build."""
+
+from __future__ import annotations
+
+import pytest
+
+from objslam_mapper.buffer import InputBuffer, NothingToBuild
+from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
+
+SLICE = SliceMeasurement("red", 1.0, 0.1, 0.05, -0.2, 0.1)
+
+
+def odom(t: int) -> OdometrySample:
+    return OdometrySample(t, 0.0, 0.0, 0.0)
+
+
+def test_missing_inputs_are_named():
+    buffer = InputBuffer(10, 10)
+    with pytest.raises(NothingToBuild, match="no odometry and no slices"):
+        buffer.snapshot()
+    buffer.add_slices(ImageSlices(5, (SLICE,)))
+    with pytest.raises(NothingToBuild, match="no odometry received"):
+        buffer.snapshot()
+    buffer.clear()
+    buffer.add_odometry(odom(1))
+    with pytest.raises(NothingToBuild, match="no slices received"):
+        buffer.snapshot()
+
+
+def test_bounded_buffers_drop_the_oldest_and_count():
+    buffer = InputBuffer(max_odometry=3, max_images=2)
+    for t in range(5):
+        buffer.add_odometry(odom(t))
+        buffer.add_slices(ImageSlices(t))
+    assert [o.stamp_ns for o in buffer.odometry] == [2, 3, 4]
+    assert [i.stamp_ns for i in buffer.images] == [3, 4]
+    assert buffer.counters.odometry_overflow == 2 and buffer.counters.slices_overflow == 3
+    assert buffer.counters.dropped() == 5
+
+
+def test_time_going_back_clears_everything():
+    buffer = InputBuffer(10, 10)
+    for t in (10, 20, 30):
+        buffer.add_odometry(odom(t))
+        buffer.add_slices(ImageSlices(t))
+    buffer.add_odometry(odom(5))
+    assert [o.stamp_ns for o in buffer.odometry] == [5]
+    assert not buffer.images
+    assert buffer.counters.time_resets == 1
+
+
+def test_slices_older_than_the_first_odometry_are_left_out_and_counted():
+    buffer = InputBuffer(10, 10)
+    buffer.add_slices(ImageSlices(1, (SLICE,)))
+    buffer.add_slices(ImageSlices(2, (SLICE,)))
+    buffer.add_odometry(odom(2))
+    buffer.add_slices(ImageSlices(3, (SLICE,)))
+    _odometry, images = buffer.snapshot()
+    assert [i.stamp_ns for i in images] == [2, 3]
+    assert buffer.counters.slices_before_odometry == 1
