@@ -15,8 +15,8 @@ from numpy.typing import NDArray
 from objslam_mapper.camera import DEFAULT_CAMERA, CameraMount, UnifiedCamera
 from objslam_mapper.catalog import load_catalog
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, Room, Table
-from objslam_tools.sim import Renderer, Scene
 from objslam_tools.silhouette import VisibleObject, visible_objects
+from objslam_tools.sim import Renderer, Scene
 
 CATALOG = load_catalog()
 ROOM = Room(-9.0, 9.0, -9.0, 9.0)

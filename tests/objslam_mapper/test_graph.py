@@ -17,6 +17,7 @@ from scipy.stats import chi2
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
+from objslam_mapper.gtsam_backend import build_gtsam_graph
 from objslam_mapper.initialization import initial_object
 from objslam_mapper.problem import GraphError, build_problem
 from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
@@ -398,73 +399,7 @@ def test_evidence_prefers_the_true_number_of_objects():
     assert separate.log_evidence > glued.log_evidence + 100
 
 
-# -- the same problem in GTSAM -----------------------------------------------------------------
-
-
-def _gtsam_graph(problem, groups):
-    """The graph as GTSAM CustomFactors (Pose2 poses, Vector5 objects), with the same residuals."""
-    n = problem.pose_count
-    graph = gtsam.NonlinearFactorGraph()
-    unit = gtsam.noiseModel.Unit
-
-    def pose_chart(theta):  # d world (x, y, theta) / d Pose2 local coordinates
-        chart = np.eye(3)
-        chart[:2, :2] = [[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]]
-        return chart
-
-    def odometry(i):
-        def error(this, values, jacobians):
-            a, b = values.atPose2(i), values.atPose2(i + 1)
-            pa, pb = np.array([a.x(), a.y(), a.theta()]), np.array([b.x(), b.y(), b.theta()])
-            c, s = np.cos(pa[2]), np.sin(pa[2])
-            d = pb[:2] - pa[:2]
-            err = np.r_[
-                between(pa, pb)[:2] - problem.increments[i, :2], wrap_angle(pb[2] - pa[2] - problem.increments[i, 2])
-            ]
-            w = 1.0 / problem.increment_stddev[i]
-            if jacobians is not None:
-                ja = np.array([[-c, -s, -s * d[0] + c * d[1]], [s, -c, -c * d[0] - s * d[1]], [0, 0, -1]])
-                jb = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
-                jacobians[0] = (w[:, None] * ja) @ pose_chart(pa[2])
-                jacobians[1] = (w[:, None] * jb) @ pose_chart(pb[2])
-            return w * err
-
-        return gtsam.CustomFactor(unit.Create(3), [i, i + 1], error)
-
-    def first_pose(this, values, jacobians):
-        p = values.atPose2(0)
-        err = np.array([p.x(), p.y(), p.theta()]) - problem.odometry_poses[0]
-        err[2] = wrap_angle(err[2])
-        if jacobians is not None:
-            jacobians[0] = np.diag(1 / problem.first_pose_stddev) @ pose_chart(p.theta())
-        return err / problem.first_pose_stddev
-
-    graph.add(gtsam.CustomFactor(unit.Create(3), [0], first_pose))
-    for i in range(n - 1):
-        graph.add(odometry(i))
-    for j, group in enumerate(groups):
-        key = n + j
-        label = problem.measurement_label[group[0]]
-        graph.add(
-            gtsam.PriorFactorVector(
-                key, problem.prior_mean[label], gtsam.noiseModel.Diagonal.Sigmas(problem.prior_stddev[label])
-            )
-        )
-        for m in group:
-            i = int(problem.measurement_pose[m])
-
-            def slice_factor(this, values, jacobians, m=m, i=i, key=key):
-                p, o = values.atPose2(i), values.atVector(key)
-                pose = np.array([p.x(), p.y(), p.theta()])
-                pred = predict_slices(pose, o[:3], o[3:], MOUNT)
-                w = 1.0 / problem.measurement_stddev[m]
-                if jacobians is not None:
-                    jacobians[0] = (w[:, None] * pred.d_pose[0]) @ pose_chart(pose[2])
-                    jacobians[1] = w[:, None] * np.hstack([pred.d_location[0], pred.d_size[0]])
-                return w * slice_error(pred.values, problem.measurements[m])[0]
-
-            graph.add(gtsam.CustomFactor(unit.Create(4), [i, key], slice_factor))
-    return graph
+# -- the same problem in GTSAM (objslam_mapper.gtsam_backend; more in test_gtsam_backend.py) ---------
 
 
 @SOLVERS
@@ -474,24 +409,21 @@ def test_same_map_and_information_as_gtsam(dense_object_limit):
     run, problem = make_run(8, scene=SCENE[:3], n_poses=15, config=tight)
     groups = run.groups(problem)
     ours = solve(problem, groups)
-    graph = _gtsam_graph(problem, groups)
-    initial = gtsam.Values()
-    for i, pose in enumerate(problem.odometry_poses):
-        initial.insert(i, gtsam.Pose2(*pose))
-    for j, group in enumerate(groups):
-        initial.insert(problem.pose_count + j, initial_object(problem, group, problem.odometry_poses))
+    # One CustomFactor per detection, solved by GTSAM's own optimizer from the same start.
+    graph, keys = build_gtsam_graph(problem, groups, per_detection=True)
+    initial = keys.to_values(
+        problem.odometry_poses, [initial_object(problem, group, problem.odometry_poses) for group in groups]
+    )
     params = gtsam.LevenbergMarquardtParams()
     params.setRelativeErrorTol(1e-12)
     params.setAbsoluteErrorTol(1e-12)
     result = gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
     theirs = np.array(
-        [[result.atPose2(i).x(), result.atPose2(i).y(), result.atPose2(i).theta()] for i in range(problem.pose_count)]
+        [[result.atPose2(k).x(), result.atPose2(k).y(), result.atPose2(k).theta()] for k in keys.pose_keys]
     )
     np.testing.assert_allclose(ours.map_T_base, theirs, atol=1e-7)
     for j, obj in enumerate(ours.objects):
-        np.testing.assert_allclose(
-            np.r_[obj.location_m, obj.size_m], result.atVector(problem.pose_count + j), atol=1e-7
-        )
+        np.testing.assert_allclose(np.r_[obj.location_m, obj.size_m], result.atVector(keys.object(j)), atol=1e-7)
     assert ours.chi2 == pytest.approx(2 * graph.error(result), rel=1e-9)
     log_det_r = graph.linearize(result).eliminateMultifrontal().logDeterminant()
     assert ours.log_det_information == pytest.approx(2 * log_det_r, abs=1e-5)

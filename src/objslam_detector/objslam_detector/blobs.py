@@ -95,7 +95,7 @@ class Segmenter:
                 own = labels[by : by + bh, bx : bx + bw] == j
                 below_camera = y + by + bh > self._horizon_row
                 if self.config.separate_same_class and below_camera:
-                    parts = separate(own)
+                    parts = separate(own, self._horizon_row - (y + by))
                 else:
                     parts = [Part(0, 0, own, False)]
                 out.extend(Blob(k, x + bx + p.col0, y + by + p.row0, p.mask, p.cut) for p in parts)

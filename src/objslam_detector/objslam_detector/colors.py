@@ -72,14 +72,40 @@ class ColorGate:
 
 
 def classify(hsv_full: NDArray[np.uint8], gates: Sequence[ColorGate]) -> NDArray[np.uint8]:
-    """Class index per pixel: 0 for none, k + 1 for ``gates[k]`` (a later gate wins where overrides overlap)."""
+    """Class index per pixel: 0 for none, k + 1 for ``gates[k]`` (a later gate wins where overrides overlap).
+
+    Hue gates that do not overlap (the derived ones never do) make the class a function
+    of hue alone: one lookup gives the class, two more its saturation and value floors.
+    """
     hue, saturation, value = cv2.split(hsv_full)
-    index = np.zeros_like(hue)
-    for k, gate in enumerate(gates):
-        mask = gate.mask(hue, saturation, value)
-        cv2.subtract(index, 255, dst=index, mask=mask)  # saturates to 0: overwrite, not add
-        cv2.add(index, k + 1, dst=index, mask=mask)
-    return index
+    tables = lookup_tables(gates)
+    if tables is None:
+        index = np.zeros_like(hue)
+        for k, gate in enumerate(gates):
+            mask = gate.mask(hue, saturation, value)
+            cv2.subtract(index, 255, dst=index, mask=mask)  # saturates to 0: overwrite, not add
+            cv2.add(index, k + 1, dst=index, mask=mask)
+        return index
+    by_hue, saturation_floor, value_floor = tables
+    index = cv2.LUT(hue, by_hue)
+    bright = cv2.compare(value, cv2.LUT(index, value_floor), cv2.CMP_GE)
+    coloured = cv2.compare(saturation, cv2.LUT(index, saturation_floor), cv2.CMP_GE)
+    return cv2.bitwise_and(index, cv2.bitwise_and(bright, coloured))
+
+
+def lookup_tables(gates: Sequence[ColorGate]) -> tuple[NDArray[np.uint8], NDArray[np.uint8], NDArray[np.uint8]] | None:
+    """(class by 8-bit hue, saturation floor by class, value floor by class), or None when hue gates overlap."""
+    by_hue = np.zeros(256, dtype=np.uint8)
+    saturation_floor = np.zeros(256, dtype=np.uint8)
+    value_floor = np.zeros(256, dtype=np.uint8)
+    for k, gate in enumerate(gates, start=1):
+        for lo, hi in gate.hue_ranges():
+            if by_hue[lo : hi + 1].any():
+                return None
+            by_hue[lo : hi + 1] = k
+        saturation_floor[k] = int(np.ceil(gate.min_saturation * 255.0))
+        value_floor[k] = int(np.ceil(gate.min_value * 255.0))
+    return by_hue, saturation_floor, value_floor
 
 
 def hue_saturation_value(color_rgb: Sequence[int]) -> tuple[float, float, float]:

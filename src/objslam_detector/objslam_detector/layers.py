@@ -11,10 +11,11 @@ jump where one silhouette ends:
   the farther object shows above the nearer one: the pixels above the nearer one's
   upper edge (carried on from beside the stretch) are the farther object's.
 
-A jump of the lower edge under a smooth upper edge is a grey thing hiding the bottom
-of one object: that blob stays whole. The farther part of a separation is marked ``cut``.
-Edge levels are medians over a few columns on each side, against pixel dithering, and
-no part may be narrower than ``MIN_SIDE_COLS`` (rims are steep only there).
+A jump of the lower edge under a smooth upper edge, to a level above the horizon, is a
+table (taller than the camera) hiding the bottom of one object: that blob stays whole.
+The farther part of a separation is marked ``cut``. Edge levels are medians over a few
+columns on each side, against pixel dithering, and no part may be narrower than
+``MIN_SIDE_COLS`` (rims are steep only there).
 """
 
 from __future__ import annotations
@@ -66,13 +67,16 @@ class _Edges(NamedTuple):
         )
 
 
-def separate(mask: NDArray[np.bool_], cut: bool = False) -> list[Part]:
-    """The objects within one blob's mask (module docstring); just the blob when it is one."""
+def separate(mask: NDArray[np.bool_], horizon_row: float, cut: bool = False) -> list[Part]:
+    """The objects within one blob's mask (module docstring); just the blob when it is one.
+
+    ``horizon_row`` is where elevation 0 falls, in the mask's row coordinates.
+    """
     rows, cols = mask.shape
     if cols < 2 * MIN_SIDE_COLS or not mask.any(axis=0).all():
         return [Part(0, 0, mask, cut)]
     edges = _Edges(np.argmax(mask, axis=0), rows - 1 - np.argmax(mask[::-1], axis=0))
-    split = _split(mask, edges)
+    split = _split(mask, edges, horizon_row)
     if split is None:
         return [Part(0, 0, mask, cut)]
     parts = []
@@ -82,8 +86,10 @@ def separate(mask: NDArray[np.bool_], cut: bool = False) -> list[Part]:
         if used_rows.size == 0:
             continue
         r0, r1, c0, c1 = used_rows[0], used_rows[-1] + 1, used_cols[0], used_cols[-1] + 1
-        for sub in separate(piece[r0:r1, c0:c1], cut or far):
-            parts.append(Part(sub.col0 + int(c0), sub.row0 + int(r0), sub.mask, sub.cut))
+        box = piece[r0:r1, c0:c1]
+        # The far part's edges are shaped by the near object in front: only the near part may hold more.
+        subs = [Part(0, 0, box, True)] if far else separate(box, horizon_row - r0, cut)
+        parts.extend(Part(sub.col0 + int(c0), sub.row0 + int(r0), sub.mask, sub.cut) for sub in subs)
     return parts
 
 
@@ -92,20 +98,28 @@ def _boundaries(cols: int) -> range:
     return range(MIN_SIDE_COLS - 1, cols - MIN_SIDE_COLS)
 
 
-def _split(mask: NDArray[np.bool_], edges: _Edges) -> tuple[NDArray, NDArray] | None:
+def _split(mask: NDArray[np.bool_], edges: _Edges, horizon_row: float) -> tuple[NDArray, NDArray] | None:
     """(near, far) masks, or None for one object (module docstring)."""
     jump = _bottom_jump(edges)
-    if jump is not None and abs(edges.jump("top", jump)) >= TOP_CHANGE_PX:
-        return _cut_at(mask, edges, jump)
     raised = _raised_stretch(mask, edges)
-    if raised is None:
-        return None  # at most a lower-edge jump under a smooth upper edge: one object, partly hidden
-    start, stop, far = raised
-    if jump is not None and start - 1 <= jump < stop:
-        # The far object shows above the near one up to where the near one ends, and on alone beyond.
-        near_side, _ = _cut_at(mask, edges, jump)
-        far = far | (mask & ~near_side)
-    return mask & ~far, far
+    if raised is not None:
+        start, stop, far = raised
+        if jump is not None and start - 1 <= jump < stop:
+            # The far object shows above the near one up to where the near one ends, and alone beyond.
+            near_side, _ = _cut_at(mask, edges, jump)
+            far = far | (mask & ~near_side)
+        return mask & ~far, far
+    if jump is None:
+        return None
+    # Beside the jump the lower edge is another object's base when the upper edge changes
+    # there, or when it lies below the camera: what hides the bottom of one object is a
+    # table taller than the camera, whose rim is above the horizon.
+    left = edges.level("bottom", jump + 1 - _SPAN, jump + 1)
+    right = edges.level("bottom", jump + 1, jump + 1 + _SPAN)
+    shelf = min(left, right)  # the higher of the two lower edges (rows grow downwards)
+    if abs(edges.jump("top", jump)) >= TOP_CHANGE_PX or shelf > horizon_row:
+        return _cut_at(mask, edges, jump)
+    return None
 
 
 def _bottom_jump(edges: _Edges) -> int | None:

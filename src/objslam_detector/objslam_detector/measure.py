@@ -30,6 +30,8 @@ _TWO_PI = 2.0 * math.pi
 # Rim extremes are fitted over this central part of the width, from at least this many columns.
 _CENTRAL_FRACTION = 0.6
 _MIN_FIT_COLUMNS = 4
+# A rim whose fit rises this much from the centre to the sides has its extreme at the sides.
+_SIDE_EXTREME_PX = 1.0
 _OUTSIDE_IN = np.array([-2, -1, 0, 1])  # samples around an edge, from two outside to the second inside
 
 
@@ -59,11 +61,14 @@ def crossing_offsets(values: NDArray[np.float32]) -> NDArray[np.float64]:
     return np.minimum(np.maximum(np.where(usable, offset, 0.0), -1.0), 1.0)
 
 
-def silhouette_edges(chroma_roi: NDArray[np.float32], own: NDArray[np.bool_]) -> tuple[float, float, float, float]:
+def silhouette_edges(
+    chroma_roi: NDArray[np.float32], own: NDArray[np.bool_], bottom_above_camera: bool = False
+) -> tuple[float, float, float, float]:
     """Left, right, top, bottom edges (ROI pixel-boundary coordinates) of a blob with a margin of background.
 
     Left and right are means over the rows where the blob is (nearly) widest; top and
-    bottom come from the central columns (``_extreme``). All samples are gathered at
+    bottom come from the central columns (``_extreme``); only a lower edge above the camera
+    can be the rim of a wider table in front, extreme at the sides. All samples are gathered at
     once: blobs are small and numerous, so the number of array operations is what costs.
     """
     n_rows, n_cols = own.shape
@@ -95,49 +100,72 @@ def silhouette_edges(chroma_roi: NDArray[np.float32], own: NDArray[np.bool_]) ->
     )
     offsets = crossing_offsets(chroma_roi[gather_rows, gather_cols].reshape(-1, 4))
     n_full, n_cols_present = len(full), len(cols)
-    left_off, right_off, top_off, bottom_off = np.split(offsets, np.cumsum([n_full, n_full, n_cols_present]))
-    left = float(np.mean(first[full] + left_off))
-    right = float(np.mean(last[full] + 1 - right_off))
+    left_off = offsets[:n_full]
+    right_off = offsets[n_full : 2 * n_full]
+    top_off = offsets[2 * n_full : 2 * n_full + n_cols_present]
+    bottom_off = offsets[2 * n_full + n_cols_present :]
+    left = float((first[full] + left_off).mean())
+    right = float((last[full] + 1 - right_off).mean())
     column_centres = cols + 0.5
-    top_edge = _extreme(column_centres, top[cols] + top_off, float(top[cols].min()), left, right)
+    top_edge = _extreme(column_centres, top[cols] + top_off, float(top[cols].min()), (left, right), False)
     lowest = -float(bottom[cols].max() + 1)
-    bottom_edge = -_extreme(column_centres, -(bottom[cols] + 1 - bottom_off), lowest, left, right)
+    bottom_edge = -_extreme(
+        column_centres, -(bottom[cols] + 1 - bottom_off), lowest, (left, right), bottom_above_camera
+    )
     return left, right, top_edge, bottom_edge
 
 
 def _extreme(
-    columns: NDArray[np.float64], edge: NDArray[np.float64], binary: float, left: float, right: float
+    columns: NDArray[np.float64],
+    edge: NDArray[np.float64],
+    binary: float,
+    sides: tuple[float, float],
+    may_peak_at_sides: bool,
 ) -> float:
-    """Smallest value of a rim's edge over the silhouette's width (rows grow outwards-negative).
+    """Outermost value of a rim's edge over the silhouette's width (smaller is further out).
 
-    A rim's extreme lies at the silhouette's centre column (rims of the object itself) or
-    at its side edges (the rim of a wider table in front). Single columns are dithered by
-    the image's pixel grid, so the extreme of a quadratic fitted to the central columns
-    is used rather than the most extreme column.
+    An object's own rims are symmetric about its bearing and most extreme there, at the
+    silhouette's centre; a wider rim in front (the table under an object) is most
+    extreme at the silhouette's sides. Single columns are dithered and stair-stepped by
+    the image's pixel grid, so a quadratic is fitted to the central columns: its value
+    at the centre, or at the sides when it may and clearly curves that way.
     """
+    left, right = sides
     centre, half = 0.5 * (left + right), 0.5 * (right - left)
     central = np.abs(columns - centre) <= _CENTRAL_FRACTION * half
     if np.count_nonzero(central) < _MIN_FIT_COLUMNS:
         return float(edge.min())
     c0, c1, c2 = _quadratic_fit(columns[central] - centre, edge[central])
-    candidates = [-half, half]
-    if c2 > 0 and abs(c1) < 2.0 * c2 * half:
-        candidates.append(-c1 / (2.0 * c2))
-    extreme = min(c0 + c1 * v + c2 * v * v for v in candidates)
+    extreme = c0
+    if may_peak_at_sides and -c2 * half * half >= _SIDE_EXTREME_PX:
+        extreme = min(c0 - c1 * half + c2 * half * half, c0 + c1 * half + c2 * half * half)
     # A fit gone wild (a blob of odd shape) must not move the edge far from the pixels.
     return min(max(extreme, binary - 1.0), binary + 1.0)
 
 
 def _quadratic_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[float, float, float]:
-    """Least-squares ``y = c0 + c1 x + c2 x^2`` (normal equations: a handful of points, called per blob)."""
-    powers = np.vander(x, 5, increasing=True).sum(axis=0)
-    normal = powers[[[0, 1, 2], [1, 2, 3], [2, 3, 4]]]
-    rhs = np.array([y.sum(), (x * y).sum(), (x * x * y).sum()])
-    try:
-        c0, c1, c2 = np.linalg.solve(normal, rhs)
-    except np.linalg.LinAlgError:
-        return float(np.mean(y)), 0.0, 0.0
-    return float(c0), float(c1), float(c2)
+    """Least-squares ``y = c0 + c1 x + c2 x^2`` by the normal equations and Cramer's rule.
+
+    Plain Python: a handful of points per blob, where array calls would cost more.
+    """
+    s0 = s1 = s2 = s3 = s4 = t0 = t1 = t2 = 0.0
+    for xi, yi in zip(x.tolist(), y.tolist(), strict=True):
+        x2 = xi * xi
+        s0 += 1.0
+        s1 += xi
+        s2 += x2
+        s3 += x2 * xi
+        s4 += x2 * x2
+        t0 += yi
+        t1 += xi * yi
+        t2 += x2 * yi
+    det = s0 * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s3 * s2) + s2 * (s1 * s3 - s2 * s2)
+    if abs(det) < 1e-12:
+        return t0 / s0, 0.0, 0.0
+    c0 = (t0 * (s2 * s4 - s3 * s3) - s1 * (t1 * s4 - s3 * t2) + s2 * (t1 * s3 - s2 * t2)) / det
+    c1 = (s0 * (t1 * s4 - t2 * s3) - t0 * (s1 * s4 - s3 * s2) + s2 * (s1 * t2 - t1 * s2)) / det
+    c2 = (s0 * (s2 * t2 - s3 * t1) - s1 * (s1 * t2 - s2 * t1) + t0 * (s1 * s3 - s2 * s2)) / det
+    return c0, c1, c2
 
 
 def image_angle(camera: UnifiedCamera, azimuth_rad: float) -> float:
@@ -165,7 +193,8 @@ def measure(
         roi = np.pad(roi, ((2, 2), (0, 0)))
         own = np.pad(own, ((2, 2), (0, 0)))
         row_lo -= 2
-    left, right, top, bottom = silhouette_edges(roi, own)
+    bottom_above_camera = bool(pano.row_elevation(blob.row0 + blob.rows) > 0.0)
+    left, right, top, bottom = silhouette_edges(roi, own, bottom_above_camera)
     az_start = float(wrap_angle(pano.column_azimuth(blob.col0 - m + left)))
     width = (right - left) * pano.azimuth_step_rad
     el_top = float(pano.row_elevation(row_lo + top))

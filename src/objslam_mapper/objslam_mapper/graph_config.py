@@ -86,6 +86,9 @@ class SliceNoiseConfig:
     )
 
 
+SOLVER_BACKENDS = ("fast", "gtsam")
+
+
 @dataclass(frozen=True)
 class SolverConfig:
     """Gauss-Newton / Levenberg-Marquardt loop of the known-association solve."""
@@ -105,6 +108,15 @@ class SolverConfig:
         "beyond it by a sparse LU (faster when many objects are small tracklets)",
         minimum=0,
     )
+    backend: str = setting(
+        "fast",
+        "which solver runs each known-association solve: 'fast' (objslam_mapper.solver, numpy) or 'gtsam' "
+        "(objslam_mapper.gtsam_backend: the same model as a GTSAM factor graph; same answers, slower)",
+    )
+
+    def __post_init__(self) -> None:
+        if self.backend not in SOLVER_BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(SOLVER_BACKENDS)}, got {self.backend!r}")
 
 
 @dataclass(frozen=True)

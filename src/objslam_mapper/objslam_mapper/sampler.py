@@ -162,7 +162,7 @@ class ChainResult:
         return {
             "samples": self.samples,
             "burn_in": self.burn_in,
-            "kept_samples": len(self.trace),
+            "kept_samples": sum(self.counts.values()),
             "acceptance_rate": round(self.overall_acceptance_rate, 4),
             "acceptance_rates": {k: round(v, 4) for k, v in self.acceptance_rates.items()},
             "proposals": {k: s.proposed for k, s in self.moves.items()},
@@ -490,8 +490,14 @@ class MetropolisHastings:
         rng: np.random.Generator | int,
         progress: Progress | None = None,
         keep_trace: bool = True,
+        on_move: Callable[[Association], None] | None = None,
     ) -> ChainResult:
-        """Run ``samples`` steps; the states after the first ``burn_in`` steps are kept."""
+        """Run ``samples`` steps; the states after the first ``burn_in`` steps are kept.
+
+        ``progress(done, total)`` is called about 200 times; ``on_move(state)`` with the
+        start state and after every accepted move (e.g. to warm-start the next solves
+        from the chain's current state).
+        """
         if not 0 <= burn_in < samples:
             raise SamplerError(f"need 0 <= burn_in < samples, got burn_in={burn_in}, samples={samples}")
         self.check_state(initial)
@@ -501,6 +507,8 @@ class MetropolisHastings:
         log_p = self.target(initial)
         if not math.isfinite(log_p):
             raise SamplerError(f"log target of the start state is {log_p}")
+        if on_move is not None:
+            on_move(initial)
         best_state, best_log_p = initial, log_p
         stats = {kind: MoveStats() for kind in self.kind_weights}
         visited = {initial}
@@ -518,6 +526,8 @@ class MetropolisHastings:
                     stats[kind].accepted += 1
                     view, log_p = proposal.view, log_p_new
                     visited.add(view.state)
+                    if on_move is not None:
+                        on_move(view.state)
                     if log_p > best_log_p:
                         best_state, best_log_p = view.state, log_p
             if step >= burn_in:

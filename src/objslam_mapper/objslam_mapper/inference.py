@@ -1,0 +1,296 @@
+r"""Unknown data association end to end: tracklets -> MH over associations -> Algorithm 1.
+
+The target of the chain (paper eq. 25, extended with clutter) is, up to a constant,
+
+    log P(J | Z) = log P(Z_obj | J) + sum over clutter tracklets tau of log L_clutter(tau)
+                   + log P(J),
+
+where ``log P(Z_obj | J)`` is the factor graph's Laplace evidence of the objects J makes
+of its non-clutter tracklets (:func:`objslam_mapper.solver.solve`, every Gaussian
+normalizer included), ``L_clutter`` the false-alarm likelihood of
+:mod:`objslam_mapper.clutter` (a density over the same slice measurements, in the same
+units), and ``P(J)`` uniform, as in the paper: every association is a priori equally
+likely, and the Occam factor of each object in the evidence is what keeps objects from
+multiplying. Isolated detections dropped by the tracklet chaining are in no J.
+
+Each solve is warm-started from the chain's current state (a proposal differs from it by
+one move) and capped at ``proposal_max_iterations``: a hopeless proposal (a merge of
+objects metres apart) then costs a few iterations and is rejected on the evidence at its
+last iterate, which is below its optimum. Values are cached per state, so the chain
+sees one fixed target whatever path led to a state.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from objslam_mapper.association import Association
+from objslam_mapper.catalog import Catalog
+from objslam_mapper.clutter import ClutterConfig
+from objslam_mapper.config import setting
+from objslam_mapper.graph_config import GraphConfig
+from objslam_mapper.map_file import BuiltMap
+from objslam_mapper.mapbuild import SampleObject, SampleSummary, build_from_samples
+from objslam_mapper.problem import GraphProblem, build_problem
+from objslam_mapper.records import ImageSlices, OdometrySample
+from objslam_mapper.sampler import MetropolisHastings, MoveConfig
+from objslam_mapper.solver import GraphSolution, solve
+from objslam_mapper.tracklets import Tracklet, TrackletConfig, tracklets_of_problem
+
+logger = logging.getLogger(__name__)
+
+# The graph of an association without objects is the odometry chain alone: its MAP is the
+# odometry (chi2 = 0), and as the map from poses to (first-pose residual, increments) has a
+# unit Jacobian determinant, the Laplace evidence -cost + sum of normalizers + d/2 log 2 pi
+# - 1/2 log|Lambda| is exactly 0. Computed here rather than solved: such a state needs no graph.
+NO_OBJECT_LOG_EVIDENCE = 0.0
+
+PhaseProgress = Callable[[str, int, int], None]  # phase ("tracklets", "sampling", "mapping"), done, total
+
+
+@dataclass(frozen=True)
+class SamplerConfig:
+    """The association sampler and map building (the mapper's ``sampler.*`` parameters)."""
+
+    samples: int = setting(6000, "MH steps in all, burn-in included (paper: 6000)", minimum=1)
+    burn_in: int = setting(2500, "first steps left out of the map (paper: 2500)", minimum=0)
+    seed: int = setting(1, "random seed of the chain (same seed, same inputs: same map)", minimum=0)
+    moves: MoveConfig = setting(MoveConfig(), "proposal moves")  # noqa: RUF009
+    tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets")  # noqa: RUF009
+    clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model")  # noqa: RUF009
+    spurious_location_stddev_m: float = setting(
+        0.30, "an object whose horizontal location stddev (largest axis) exceeds this is spurious (m)", minimum=0.0
+    )
+    existence_threshold: float = setting(
+        0.5, "identities with P(ID|Z) above this make the map", minimum=0.0, maximum=1.0
+    )
+    report_min_fraction: float = setting(
+        0.05, "other identities held by at least this fraction of samples are reported as rejected", minimum=0.0
+    )
+    initial_merge_distance_m: float = setting(
+        0.6, "start state: a tracklet joins the nearest same-class object within this distance (m)", minimum=0.0
+    )
+    proposal_max_iterations: int = setting(15, "most solver linearizations per proposed association", minimum=1)
+    solution_cache_size: int = setting(256, "graph solutions kept for warm starts and map building", minimum=1)
+
+    def __post_init__(self) -> None:
+        if self.burn_in >= self.samples:
+            raise ValueError(f"burn_in ({self.burn_in}) must be smaller than samples ({self.samples})")
+
+
+class AssociationTarget:
+    """``log P(J|Z)`` of associations of ``tracklets`` (see the module docstring); callable."""
+
+    def __init__(
+        self,
+        problem: GraphProblem,
+        tracklets: Sequence[Tracklet],
+        clutter: ClutterConfig,
+        *,
+        max_iterations: int | None = None,
+        cache_size: int = 256,
+    ):
+        self.problem = problem
+        self.tracklets = list(tracklets)
+        self.clutter = clutter
+        self.max_iterations = max_iterations
+        self.cache_size = cache_size
+        self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
+        self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
+        self._anchor: GraphSolution | None = None
+        self.solves = 0
+        self.solve_seconds = 0.0
+
+    def groups(self, state: Association) -> list[NDArray[np.int64]]:
+        """Measurement indices of each object of ``state``, in its object order."""
+        return [np.sort(np.concatenate([self._members[t] for t in group])) for group in state.groups]
+
+    def clutter_log_likelihood(self, state: Association) -> float:
+        return sum(self.clutter.log_likelihood(len(self.tracklets[t])) for t in state.clutter)
+
+    def solution(self, state: Association) -> GraphSolution:
+        cached = self._solutions.get(state)
+        if cached is not None:
+            self._solutions.move_to_end(state)
+            return cached
+        start = time.perf_counter()
+        max_iterations = None if self._anchor is None else self.max_iterations
+        result = solve(self.problem, self.groups(state), warm_start=self._anchor, max_iterations=max_iterations)
+        self.solve_seconds += time.perf_counter() - start
+        self.solves += 1
+        self._solutions[state] = result
+        if len(self._solutions) > self.cache_size:
+            self._solutions.popitem(last=False)
+        return result
+
+    def __call__(self, state: Association) -> float:
+        if state.n_objects == 0:
+            return NO_OBJECT_LOG_EVIDENCE + self.clutter_log_likelihood(state)
+        return self.solution(state).log_evidence + self.clutter_log_likelihood(state)
+
+    def move_to(self, state: Association) -> None:
+        """The chain is now in ``state``: warm-start later solves from its solution."""
+        self._anchor = self._solutions.get(state, self._anchor)
+
+    def summary(self, state: Association) -> SampleSummary:
+        """MAP and marginals of ``state`` (Algorithm 1, step 2a)."""
+        if state.n_objects == 0:
+            return SampleSummary(map_T_base=np.array(self.problem.odometry_poses), objects=())
+        warm = self._solutions.get(state, self._anchor)
+        result = solve(self.problem, self.groups(state), warm_start=warm, with_covariances=True)
+        objects = []
+        for est in result.objects:
+            nan3, nan2 = np.full((3, 3), np.nan), np.full((2, 2), np.nan)
+            objects.append(
+                SampleObject(
+                    identity=frozenset(int(m) for m in est.measurement_indices),
+                    label=est.label,
+                    location_m=np.asarray(est.location_m, dtype=float),
+                    size_m=np.asarray(est.size_m, dtype=float),
+                    location_cov=nan3 if est.location_cov is None else np.asarray(est.location_cov, dtype=float),
+                    size_cov=nan2 if est.size_cov is None else np.asarray(est.size_cov, dtype=float),
+                )
+            )
+        return SampleSummary(map_T_base=np.asarray(result.map_T_base, dtype=float), objects=tuple(objects))
+
+
+def initial_association(tracklets: Sequence[Tracklet], max_distance_m: float) -> Association:
+    """A start state: tracklets by first image, each joining the nearest object of its class
+    whose centroid is within ``max_distance_m`` and that was not seen in the same images."""
+    members: list[list[int]] = []
+    centroids: list[NDArray[np.float64]] = []
+    frames: list[set[int]] = []
+    order = sorted(range(len(tracklets)), key=lambda t: (tracklets[t].frame_indices[0], t))
+    for t in order:
+        tr = tracklets[t]
+        xy = np.asarray(tr.position_xy_m)
+        best, best_d = None, max_distance_m
+        for j, group in enumerate(members):
+            if tracklets[group[0]].label != tr.label or frames[j] & set(tr.frame_indices):
+                continue
+            d = float(np.hypot(*(centroids[j] - xy)))
+            if d <= best_d:
+                best, best_d = j, d
+        if best is None:
+            members.append([t])
+            centroids.append(xy)
+            frames.append(set(tr.frame_indices))
+        else:
+            members[best].append(t)
+            weights = np.array([len(tracklets[u]) for u in members[best]], dtype=float)
+            points = np.array([tracklets[u].position_xy_m for u in members[best]])
+            centroids[best] = weights @ points / weights.sum()
+            frames[best] |= set(tr.frame_indices)
+    return Association.from_groups(len(tracklets), members)
+
+
+def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgress | None = None) -> BuiltMap:
+    """Tracklets, MH over associations and Algorithm 1 on a built factor-graph problem."""
+    report = progress or (lambda _phase, _done, _total: None)
+    started = time.perf_counter()
+    report("tracklets", 0, 1)
+    chained = tracklets_of_problem(problem, config.tracklets)
+    report("tracklets", 1, 1)
+    tracklet_seconds = time.perf_counter() - started
+    diagnostics: dict[str, Any] = {
+        "seed": config.seed,
+        "poses": problem.pose_count,
+        "measurements": problem.measurement_count,
+        "rejected_images": problem.rejected_image_count,
+        "rejected_slices": problem.rejected_slice_count,
+        "tracklets": len(chained.tracklets),
+        "isolated_dropped": len(chained.dropped_measurements),
+    }
+    target = AssociationTarget(
+        problem,
+        chained.tracklets,
+        config.clutter,
+        max_iterations=config.proposal_max_iterations,
+        cache_size=config.solution_cache_size,
+    )
+    if not chained.tracklets:
+        logger.warning("no tracklets (every detection isolated): the map holds no objects")
+        summary = target.summary(Association(()))
+        built = build_from_samples([(summary, 1)], problem.stamps_ns, diagnostics=diagnostics)
+        report("mapping", 1, 1)
+        return built
+
+    sampler = MetropolisHastings(
+        chained.labels,
+        target,
+        config.moves,
+        positions_xy_m=[t.position_xy_m for t in chained.tracklets],
+        tracklet_weights=[len(t) for t in chained.tracklets],
+        allow_clutter=config.clutter.enabled,
+    )
+    start = initial_association(chained.tracklets, config.initial_merge_distance_m)
+    chain = sampler.run(
+        start,
+        config.samples,
+        config.burn_in,
+        np.random.default_rng(config.seed),
+        progress=lambda done, total: report("sampling", done, total),
+        keep_trace=False,
+        on_move=target.move_to,
+    )
+    sampling_seconds = time.perf_counter() - started - tracklet_seconds
+
+    def summaries():
+        for k, (state, count) in enumerate(chain.counts.items()):
+            report("mapping", k, len(chain.counts))
+            yield target.summary(state), count
+        report("mapping", len(chain.counts), len(chain.counts))
+
+    diagnostics.update(chain.diagnostics())
+    diagnostics["start_objects"] = start.n_objects
+    diagnostics["best_state_objects"] = chain.best_state.n_objects
+    diagnostics["best_state_clutter_tracklets"] = len(chain.best_state.clutter)
+    diagnostics["solves"] = target.solves
+    built = build_from_samples(
+        summaries(),
+        problem.stamps_ns,
+        spurious_location_stddev_m=config.spurious_location_stddev_m,
+        existence_threshold=config.existence_threshold,
+        report_min_fraction=config.report_min_fraction,
+        diagnostics=diagnostics,
+    )
+    total = time.perf_counter() - started
+    built.diagnostics["timings_s"] = {
+        "tracklets": round(tracklet_seconds, 3),
+        "sampling": round(sampling_seconds, 3),
+        "solving_during_sampling": round(target.solve_seconds, 3),
+        "mapping": round(total - tracklet_seconds - sampling_seconds, 3),
+        "total": round(total, 3),
+    }
+    logger.info(
+        "map: %d objects, %d rejected; %d tracklets, %d distinct associations visited, acceptance %.2f, %.1f s",
+        len(built.objects),
+        len(built.rejected),
+        len(chained.tracklets),
+        chain.distinct_visited,
+        chain.overall_acceptance_rate,
+        total,
+    )
+    return built
+
+
+def build_map(
+    odometry: Sequence[OdometrySample],
+    images: Sequence[ImageSlices],
+    catalog: Catalog,
+    graph: GraphConfig | None = None,
+    sampler: SamplerConfig | None = None,
+    progress: PhaseProgress | None = None,
+) -> BuiltMap:
+    """The whole offline pipeline from odometry and slices to the object map."""
+    graph = graph or GraphConfig()
+    problem = build_problem(odometry, images, graph.camera_mount.to_mount(), catalog, graph)
+    return infer_map(problem, sampler or SamplerConfig(), progress)

@@ -1,0 +1,259 @@
+"""The GTSAM backend solves the same model as the fast solver, to the same numbers.
+
+Every granularity of the graph (one factor per detection, per group and window of poses,
+per whole group) and both drives (GTSAM's optimizer, our loop over GTSAM linearizations)
+must give the fast solver's MAP, chi-square, log-determinant, Laplace evidence and object
+marginals; the custom factors' analytic Jacobians are checked against finite differences.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gtsam
+import numpy as np
+import pytest
+
+from objslam_mapper import gtsam_backend
+from objslam_mapper.backends import solve_with_backend
+from objslam_mapper.catalog import load_catalog
+from objslam_mapper.config import ConfigError, from_mapping
+from objslam_mapper.graph_config import GraphConfig, SolverConfig, load_graph_config
+from objslam_mapper.gtsam_backend import (
+    GtsamBackendError,
+    _damped,
+    _Linearizer,
+    build_gtsam_graph,
+    solve_gtsam,
+    time_naive_solves,
+)
+from objslam_mapper.problem import build_problem
+from objslam_mapper.records import ImageSlices
+from objslam_mapper.solver import solve
+from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
+
+CATALOG = load_catalog()
+SCENE = (
+    SyntheticObject("red", (2.2, 0.3, 0.0), (0.31, 0.58)),
+    SyntheticObject("green", (-0.5, 1.0, 0.0), (0.41, 0.39)),
+    SyntheticObject("cyan", (0.4, -0.9, 0.75), (0.15, 0.26)),
+)
+# Tight tolerances: both backends then stop at the optimum, not somewhere near it.
+TIGHT = dataclasses.replace(GraphConfig(), solver=SolverConfig(absolute_tolerance=1e-12))
+N_POSES = 15
+
+
+def make_problem(seed, config=TIGHT, duplicate_slice=True):
+    """A small run; image 3 sees the red object twice (a blob split in two), both slices assigned to it."""
+    poses = ellipse_trajectory(N_POSES, (3.0, 1.8))
+    stamps = [k * 250_000_000 for k in range(N_POSES)]
+    run = simulate_run(poses, stamps, SCENE, CATALOG, np.random.default_rng(seed), config=config)
+    images = list(run.images)
+    slice_object = list(run.slice_object)
+    if duplicate_slice:
+        images[3] = ImageSlices(images[3].stamp_ns, (*images[3].slices, images[3].slices[0]))
+        slice_object[3] = (*slice_object[3], slice_object[3][0])
+    run = dataclasses.replace(run, images=tuple(images), slice_object=tuple(slice_object))
+    problem = build_problem(run.odometry, run.images, config.camera_mount.to_mount(), CATALOG, config)
+    return problem, [np.asarray(g) for g in run.groups(problem)]
+
+
+@pytest.fixture(scope="module")
+def reference():
+    problem, groups = make_problem(8)
+    return problem, groups, solve(problem, groups, with_covariances=True)
+
+
+def state(solution):
+    return solution.map_T_base, np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
+
+
+def assert_same_solution(theirs, ours, atol_state=1e-6):
+    assert theirs.converged
+    np.testing.assert_allclose(theirs.map_T_base, ours.map_T_base, atol=atol_state)
+    np.testing.assert_allclose(state(theirs)[1], state(ours)[1], atol=atol_state)
+    np.testing.assert_array_equal(theirs.object_of_measurement, ours.object_of_measurement)
+    assert theirs.chi2 == pytest.approx(ours.chi2, abs=1e-4)
+    assert theirs.log_det_information == pytest.approx(ours.log_det_information, abs=1e-4)
+    assert theirs.log_evidence == pytest.approx(ours.log_evidence, abs=1e-4)
+
+
+@pytest.mark.parametrize("drive", ["python", "optimizer"])
+@pytest.mark.parametrize(
+    "per_detection, window_poses",
+    [(True, None), (False, 4), (False, None)],
+    ids=["per-detection", "per-group-window", "per-group"],
+)
+def test_same_map_evidence_and_marginals_as_the_fast_solver(reference, drive, per_detection, window_poses):
+    problem, groups, ours = reference
+    theirs = solve_gtsam(
+        problem, groups, with_covariances=True, per_detection=per_detection, drive=drive, window_poses=window_poses
+    )
+    assert_same_solution(theirs, ours)
+    for a, b in zip(theirs.objects, ours.objects, strict=True):
+        assert a.label == b.label
+        np.testing.assert_array_equal(a.measurement_indices, b.measurement_indices)
+        np.testing.assert_allclose(a.location_cov, b.location_cov, rtol=1e-4)
+        np.testing.assert_allclose(a.size_cov, b.size_cov, rtol=1e-4)
+
+
+def test_warm_start_and_a_split_match_the_fast_solver(reference):
+    problem, groups, ours = reference
+    warm = solve_gtsam(problem, groups, warm_start=ours)
+    assert warm.iterations == 1
+    assert_same_solution(warm, ours)
+    # A split starts both parts from the parent, as in the fast solver.
+    split = [groups[0][::2], groups[0][1::2], *groups[1:]]
+    assert_same_solution(solve_gtsam(problem, split, warm_start=ours), solve(problem, split, warm_start=ours))
+
+
+def test_a_bad_start_needs_damping_and_still_reaches_the_optimum(reference, monkeypatch):
+    problem, groups, ours = reference
+    rng = np.random.default_rng(0)
+    objects = tuple(
+        dataclasses.replace(o, location_m=o.location_m + np.r_[rng.normal(0.0, 1.0, 2), 0.0]) for o in ours.objects
+    )
+    poses = ours.map_T_base + rng.normal(0.0, [1.0, 1.0, 0.5], ours.map_T_base.shape)
+    bad = dataclasses.replace(ours, objects=objects, map_T_base=poses)
+    dampings = []
+
+    def spy(linear, damping, dims):
+        dampings.append(damping)
+        return _damped(linear, damping, dims)
+
+    monkeypatch.setattr(gtsam_backend, "_damped", spy)
+    theirs = solve_gtsam(problem, groups, warm_start=bad, drive="python")
+    assert dampings
+    assert_same_solution(theirs, ours)
+
+
+def test_default_tolerances_stop_near_the_same_optimum():
+    problem, groups = make_problem(3, config=GraphConfig(), duplicate_slice=False)
+    ours = solve(problem, groups)
+    theirs = solve_gtsam(problem, groups)
+    assert theirs.converged
+    np.testing.assert_allclose(theirs.map_T_base, ours.map_T_base, atol=1e-3)
+    assert theirs.log_evidence == pytest.approx(ours.log_evidence, abs=1e-2)
+
+
+# -- the factors -------------------------------------------------------------------------------
+
+
+def numerical_jacobian(factor, values, step=1e-6):
+    """Central differences of the whitened error over each key's tangent space (Pose2 chart, vectors)."""
+    blocks = []
+    for key in factor.keys():
+        dim = 3 if gtsam.Symbol(key).chr() == ord("x") else 5
+        block = np.empty((factor.dim(), dim))
+        for k in range(dim):
+            delta = gtsam.VectorValues()
+            delta.insert(key, step * np.eye(dim)[k])
+            plus = factor.whitenedError(values.retract(delta))
+            delta = gtsam.VectorValues()
+            delta.insert(key, -step * np.eye(dim)[k])
+            minus = factor.whitenedError(values.retract(delta))
+            block[:, k] = (plus - minus) / (2 * step)
+        blocks.append(block)
+    return np.hstack(blocks)
+
+
+@pytest.mark.parametrize("per_detection, window_poses", [(True, None), (False, 4), (False, None)])
+def test_factor_jacobians_match_finite_differences(reference, per_detection, window_poses):
+    problem, groups, ours = reference
+    rng = np.random.default_rng(1)
+    graph, keys = build_gtsam_graph(problem, groups, per_detection=per_detection, window_poses=window_poses)
+    # A random state near the MAP (the model is defined there), headings across +-pi included.
+    poses, objects = state(ours)
+    poses = poses + rng.normal(0.0, [0.05, 0.05, 0.1], poses.shape)
+    poses[0, 2] = np.pi - 1e-3
+    objects = objects + rng.normal(0.0, 0.02, objects.shape)
+    values = keys.to_values(poses, objects)
+    checked = 0
+    for index in range(graph.size()):
+        factor = graph.at(index)
+        if not isinstance(factor, gtsam.CustomFactor):
+            continue
+        analytic, b = gtsam.JacobianFactor(factor.linearize(values)).jacobian()
+        np.testing.assert_allclose(-b, factor.whitenedError(values), rtol=1e-12)
+        np.testing.assert_allclose(analytic, numerical_jacobian(factor, values), rtol=1e-5, atol=1e-4)
+        checked += 1
+    if per_detection:
+        assert checked == 1 + (N_POSES - 1) + sum(len(g) for g in groups)
+    else:
+        assert checked >= 2 + len(groups)
+
+
+def test_one_factor_per_group_and_window():
+    problem, groups = make_problem(8)
+    per_group, keys = build_gtsam_graph(problem, groups, window_poses=None)
+    # First-pose prior, one odometry factor, a prior and a slice factor per group.
+    assert per_group.size() == 2 + 2 * len(groups)
+    assert len(per_group.at(2 + 1).keys()) == len(np.unique(problem.measurement_pose[groups[0]])) + 1
+    assert keys.object(0) in per_group.at(2 + 1).keys()
+    windowed, _ = build_gtsam_graph(problem, groups, window_poses=5)
+    windows = [len(np.unique(problem.measurement_pose[g] // 5)) for g in groups]
+    assert windowed.size() == 1 + int(np.ceil((N_POSES - 1) / 5)) + len(groups) + sum(windows)
+    per_detection, _ = build_gtsam_graph(problem, groups, per_detection=True)
+    assert per_detection.size() == 1 + (N_POSES - 1) + len(groups) + sum(len(g) for g in groups)
+
+
+def test_a_camera_inside_an_object_is_a_huge_error(reference):
+    problem, groups, ours = reference
+    graph, keys = build_gtsam_graph(problem, groups)
+    poses, objects = state(ours)
+    seen_from = poses[problem.measurement_pose[groups[0][0]]]
+    objects[0, :2] = seen_from[:2]
+    assert graph.error(keys.to_values(poses, objects)) > 1e10
+
+
+def test_damping_adds_the_scaled_diagonal(reference):
+    problem, groups, ours = reference
+    graph, keys = build_gtsam_graph(problem, groups)
+    linearize = _Linearizer(graph, keys)
+    linear = linearize(keys.to_values(*state(ours)))
+    order = gtsam.Ordering()
+    for key in sorted(linearize.dims):
+        order.push_back(key)
+    hessian = linear.graph.augmentedHessian(order)[:-1, :-1]
+    damped = _damped(linear.graph, 0.3, linearize.dims).augmentedHessian(order)[:-1, :-1]
+    np.testing.assert_allclose(damped, hessian + 0.3 * np.diag(np.diag(hessian)), rtol=1e-12, atol=1e-9)
+
+
+# -- configuration, dispatch, timing -----------------------------------------------------------
+
+
+def test_backend_setting_is_validated_and_read_from_the_mapper_file(repo_root, tmp_path):
+    assert SolverConfig().backend == "fast"
+    assert load_graph_config(repo_root / "config" / "mapper.yaml").solver.backend == "fast"
+    with pytest.raises(ConfigError, match="backend"):
+        from_mapping(GraphConfig, {"solver": {"backend": "ceres"}})
+    custom = tmp_path / "mapper.yaml"
+    custom.write_text("mapper:\n  ros__parameters:\n    solver.backend: gtsam\n")
+    assert load_graph_config(custom).solver.backend == "gtsam"
+
+
+def test_solve_with_backend_dispatches_on_the_setting(reference):
+    problem, groups, ours = reference
+    fast = solve_with_backend(problem, groups, with_covariances=True)
+    np.testing.assert_array_equal(fast.map_T_base, ours.map_T_base)
+    assert fast.log_evidence == ours.log_evidence
+    on_gtsam = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, backend="gtsam"))
+    theirs = solve_with_backend(on_gtsam, groups, warm_start=ours, drive="optimizer")
+    assert theirs.log_evidence == solve_gtsam(problem, groups, warm_start=ours, drive="optimizer").log_evidence
+
+
+def test_bad_requests_are_refused(reference):
+    problem, groups, _ = reference
+    with pytest.raises(GtsamBackendError, match="drive"):
+        solve_gtsam(problem, groups, drive="isam2")
+    with pytest.raises(GtsamBackendError, match="window_poses"):
+        build_gtsam_graph(problem, groups, window_poses=0)
+
+
+def test_time_naive_solves_counts_what_it_timed(reference):
+    problem, groups, _ = reference
+    seconds, count = time_naive_solves(problem, [groups[:1], groups[1:]], max_seconds=60.0)
+    assert count == 2 and seconds > 0.0
+    assert time_naive_solves(problem, [groups, groups], max_seconds=0.0)[1] == 1
+    with pytest.raises(GtsamBackendError):
+        time_naive_solves(problem, [], max_seconds=1.0)

@@ -1,0 +1,166 @@
+"""Association inference on the real factor-graph target (synthetic scenes, no images)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from objslam_mapper.association import CLUTTER, Association, enumerate_associations
+from objslam_mapper.catalog import load_catalog
+from objslam_mapper.clutter import ClutterConfig
+from objslam_mapper.geometry import between, wrap_angle
+from objslam_mapper.inference import (
+    NO_OBJECT_LOG_EVIDENCE,
+    AssociationTarget,
+    SamplerConfig,
+    build_map,
+    infer_map,
+    initial_association,
+)
+from objslam_mapper.sampler import ExactDistribution, MetropolisHastings
+from objslam_mapper.solver import solve
+from objslam_mapper.tracklets import Tracklet, tracklets_of_problem
+
+from .association_scenes import GREEN, RED_A, RED_B, problem_of, simulate, with_poster
+
+QUICK = SamplerConfig(samples=500, burn_in=150)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    run = simulate()
+    problem = problem_of(run)
+    return run, problem, tracklets_of_problem(problem)
+
+
+def test_the_scene_needs_association(scene):
+    _run, _problem, chained = scene
+    # Each red object is seen on the way out and again on the way back: two tracklets each.
+    assert sorted(chained.labels) == ["green", "red", "red", "red", "red"]
+
+
+def test_odometry_chain_alone_has_zero_log_evidence(scene):
+    """NO_OBJECT_LOG_EVIDENCE: the Jacobian from poses to (first-pose residual, increments)
+    has determinant 1, so log|Lambda| is the sum of the factors' log-informations and the
+    Laplace evidence of the odometry chain is 0 (checked by finite differences)."""
+    _run, problem, _ = scene
+    poses = np.array(problem.odometry_poses[:12])
+    stddev = np.vstack([problem.first_pose_stddev, problem.increment_stddev[:11]])
+
+    def residuals(flat):
+        p = flat.reshape(-1, 3)
+        rows = [p[0] - poses[0]] + [between(p[i - 1], p[i]) for i in range(1, len(p))]
+        out = np.array(rows)
+        out[:, 2] = wrap_angle(out[:, 2])
+        return (out / stddev).ravel()
+
+    x0 = poses.ravel()
+    jac = np.column_stack([(residuals(x0 + h) - residuals(x0 - h)) / 2e-6 for h in 1e-6 * np.eye(len(x0))])
+    log_det_information = np.linalg.slogdet(jac.T @ jac)[1]
+    log_normalizers = -0.5 * np.sum(np.log(2 * np.pi) + 2 * np.log(stddev))
+    evidence = log_normalizers + 0.5 * len(x0) * np.log(2 * np.pi) - 0.5 * log_det_information
+    assert evidence == pytest.approx(NO_OBJECT_LOG_EVIDENCE, abs=1e-5)
+
+
+def test_target_is_evidence_plus_clutter_likelihood(scene):
+    _run, problem, chained = scene
+    clutter = ClutterConfig()
+    target = AssociationTarget(problem, chained.tracklets, clutter)
+    green = chained.labels.index("green")
+    state = Association.of([CLUTTER if t == green else t for t in range(len(chained.tracklets))])
+    groups = [list(chained.tracklets[t].measurement_indices) for t in range(len(chained.tracklets)) if t != green]
+    expected = solve(problem, groups).log_evidence + len(chained.tracklets[green]) * clutter.log_likelihood_per_slice
+    assert target(state) == pytest.approx(expected, abs=1e-6)
+    all_clutter = Association.of([CLUTTER] * len(chained.tracklets))
+    slices = sum(len(t) for t in chained.tracklets)
+    assert target(all_clutter) == pytest.approx(slices * clutter.log_likelihood_per_slice)
+
+
+@pytest.mark.slow
+def test_chain_on_the_real_target_matches_its_exact_distribution(scene):
+    """Every association of the scene's tracklets solved by the factor graph, then tempered
+    (log target / 20) so that more than a handful of states carry mass."""
+    _run, problem, chained = scene
+    target = AssociationTarget(problem, chained.tracklets, ClutterConfig(), max_iterations=15)
+    states = enumerate_associations(chained.labels)
+    tempered = {s: target(s) / 20.0 for s in states}
+    exact = ExactDistribution.of(states, tempered.__getitem__)
+    assert exact.probabilities.max() < 0.9
+    sampler = MetropolisHastings(
+        chained.labels,
+        tempered.__getitem__,
+        positions_xy_m=[t.position_xy_m for t in chained.tracklets],
+        tracklet_weights=[len(t) for t in chained.tracklets],
+    )
+    result = sampler.run(initial_association(chained.tracklets, 0.6), 40_000, 1000, 3, keep_trace=False)
+    assert exact.total_variation(result.counts) < 0.05
+
+
+def _near(obj, truth, tolerance_m):
+    return np.hypot(obj.position_m[0] - truth.location_m[0], obj.position_m[1] - truth.location_m[1]) < tolerance_m
+
+
+def test_two_objects_of_one_class_08_m_apart_stay_two_objects(scene):
+    _run, problem, _ = scene
+    built = infer_map(problem, QUICK)
+    reds = [o for o in built.objects if o.label == "red"]
+    assert len(reds) == 2 and len(built.objects) == 3
+    assert any(_near(o, RED_A, 0.15) for o in reds) and any(_near(o, RED_B, 0.15) for o in reds)
+    assert all(o.existence_probability > 0.5 for o in built.objects)
+    assert built.diagnostics["start_objects"] > 3  # the sampler, not the start state, joined them
+
+
+def test_a_poster_seen_from_a_few_poses_does_not_become_an_object():
+    run = simulate()
+    problem = problem_of(run, with_poster(run))
+    built = infer_map(problem, QUICK)
+    greens = [o for o in built.objects if o.label == "green"]
+    plain = tracklets_of_problem(problem_of(run))
+    green_slices = sum(len(t) for t in plain.tracklets if t.label == "green")
+    assert len(greens) == 1 and _near(greens[0], GREEN, 0.2)
+    assert greens[0].measurement_count == green_slices  # the poster's slices are not in it
+    assert not any(np.hypot(o.position_m[0] - 3.0, o.position_m[1] + 2.5) < 1.0 for o in built.objects)
+    assert built.diagnostics["best_state_clutter_tracklets"] == 1
+
+
+def test_build_map_runs_the_pipeline_deterministically():
+    run = simulate()
+    phases = []
+    maps = [
+        build_map(run.odometry, run.images, load_catalog(), sampler=QUICK, progress=lambda p, d, t: phases.append(p))
+        for _ in range(2)
+    ]
+    for built in maps:
+        del built.diagnostics["timings_s"]
+    assert maps[0] == maps[1]
+    assert list(dict.fromkeys(phases)) == ["tracklets", "sampling", "mapping"]
+    built = maps[0]
+    assert len(built.trajectory) == len(run.images)
+    assert [p.stamp_ns for p in built.trajectory] == [im.stamp_ns for im in run.images]
+    assert np.abs(built.trajectory_array()[:, :2] - run.true_map_T_base[:, :2]).max() < 0.3
+    diagnostics = built.diagnostics
+    for key in ("samples", "burn_in", "acceptance_rates", "distinct_associations_visited", "tracklets"):
+        assert key in diagnostics
+    assert diagnostics["samples"] == 500 and diagnostics["kept_samples"] == 350
+
+
+def test_initial_association_joins_near_tracklets_of_one_class_seen_apart():
+    def tracklet(label, frames, xy):
+        return Tracklet(label, tuple(range(frames[0], frames[1])), tuple(range(frames[0], frames[1])), xy)
+
+    tracklets = [
+        tracklet("red", (0, 5), (0.0, 0.0)),
+        tracklet("red", (10, 15), (0.3, 0.0)),  # near the first, seen later: same object
+        tracklet("red", (3, 8), (-0.1, -0.1)),  # near, but seen together with the first
+        tracklet("green", (20, 25), (0.0, 0.1)),  # near, other class
+        tracklet("red", (30, 35), (2.0, 0.0)),  # too far
+    ]
+    state = initial_association(tracklets, 0.6)
+    assert state == Association.of([0, 0, 1, 2, 3])
+
+
+def test_sampler_config_validates():
+    with pytest.raises(ValueError, match="burn_in"):
+        dataclasses.replace(QUICK, burn_in=500)
