@@ -17,7 +17,7 @@ PANO = Panorama.build(DEFAULT_CAMERA, PanoramaConfig())
 
 
 def test_grid_covers_the_circle_from_low_elevations_to_the_image_corners():
-    assert PANO.cols == 1440
+    assert PANO.cols == round(360.0 / PanoramaConfig().azimuth_resolution_deg)
     assert math.isclose(PANO.row_elevation(PANO.rows), math.radians(-80.0), abs_tol=1e-9)
     corner = highest_visible_elevation(DEFAULT_CAMERA)
     assert 0.0 < corner < DEFAULT_CAMERA.max_elevation_rad

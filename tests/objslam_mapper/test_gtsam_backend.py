@@ -127,6 +127,19 @@ def test_a_bad_start_needs_damping_and_still_reaches_the_optimum(reference, monk
     assert_same_solution(theirs, ours)
 
 
+def test_no_objects_and_an_object_seen_once(reference):
+    problem, groups, _ = reference
+    # Odometry alone is a chain of Gaussians over the poses: it integrates to exactly 1.
+    empty = solve_gtsam(problem, [], with_covariances=True)
+    assert empty.converged and empty.objects == ()
+    assert empty.log_evidence == pytest.approx(0.0, abs=1e-8)
+    once = [groups[0][:1]]
+    ours = solve(problem, once, with_covariances=True)
+    theirs = solve_gtsam(problem, once, with_covariances=True)
+    assert_same_solution(theirs, ours)
+    np.testing.assert_allclose(theirs.objects[0].location_cov, ours.objects[0].location_cov, rtol=1e-4)
+
+
 def test_default_tolerances_stop_near_the_same_optimum():
     problem, groups = make_problem(3, config=GraphConfig(), duplicate_slice=False)
     ours = solve(problem, groups)

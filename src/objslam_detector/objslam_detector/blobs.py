@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -43,7 +44,7 @@ class Blob:
     def cols(self) -> int:
         return self.mask.shape[1]
 
-    @property
+    @cached_property
     def pixel_count(self) -> int:
         return int(np.count_nonzero(self.mask))
 
@@ -141,4 +142,6 @@ def seam_shift(mask: NDArray[np.uint8]) -> int:
 
 def strip(array: NDArray, rows: slice, col_start: int, col_stop: int) -> NDArray:
     """``array[rows, col_start:col_stop]`` with columns taken modulo the width (the panorama wraps)."""
+    if 0 <= col_start and col_stop <= array.shape[1]:
+        return array[rows, col_start:col_stop]
     return np.take(array[rows], np.arange(col_start, col_stop), axis=1, mode="wrap")

@@ -13,9 +13,9 @@ class PanoramaConfig:
     """The azimuth x elevation image the omnidirectional image is unwarped into."""
 
     azimuth_resolution_deg: float = setting(
-        0.25, "panorama column width, deg (about the camera's own resolution at the horizon)", minimum=0.05, maximum=2.0
+        0.3, "panorama column width, deg (about the camera's own resolution at the horizon)", minimum=0.05, maximum=2.0
     )
-    elevation_resolution_deg: float = setting(0.25, "panorama row height, deg", minimum=0.05, maximum=2.0)
+    elevation_resolution_deg: float = setting(0.3, "panorama row height, deg", minimum=0.05, maximum=2.0)
     min_elevation_deg: float = setting(
         -80.0, "lowest elevation unwarped, deg (straight down is -90)", minimum=-89.5, maximum=0.0
     )

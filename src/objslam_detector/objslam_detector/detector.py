@@ -120,11 +120,8 @@ def _at_view_edge(blob: Blob, pano: Panorama, rgb_panorama: NDArray[np.uint8]) -
     """
     if blob.row0 == 0 or blob.row0 + blob.rows >= pano.rows:
         return True
-    end = blob.row0 + blob.rows
+    rows = slice(blob.row0 - 1, blob.row0 + blob.rows + 1, blob.rows + 1)  # the rows just above and below
     cols = (blob.col0, blob.col0 + blob.cols)
-    for row in (blob.row0 - 1, end):
-        if not strip(pano.inside, slice(row, row + 1), *cols).all():
-            return True
-        if np.any(strip(rgb_panorama, slice(row, row + 1), *cols).max(axis=-1) <= _BLACK):
-            return True
-    return False
+    if not strip(pano.inside, rows, *cols).all():
+        return True
+    return bool(np.any(strip(rgb_panorama, rows, *cols).max(axis=-1) <= _BLACK))

@@ -32,7 +32,8 @@ _CENTRAL_FRACTION = 0.6
 _MIN_FIT_COLUMNS = 4
 # A rim whose fit rises this much from the centre to the sides has its extreme at the sides.
 _SIDE_EXTREME_PX = 1.0
-_OUTSIDE_IN = np.array([-2, -1, 0, 1])  # samples around an edge, from two outside to the second inside
+_OUTSIDE_IN = np.arange(-3, 3)  # samples around an edge: three outside, three inside the blob
+_SAMPLES = len(_OUTSIDE_IN)
 
 
 def chroma(rgb: NDArray[np.uint8]) -> NDArray[np.float32]:
@@ -40,24 +41,29 @@ def chroma(rgb: NDArray[np.uint8]) -> NDArray[np.float32]:
 
 
 def crossing_offsets(values: NDArray[np.float32]) -> NDArray[np.float64]:
-    """Sub-pixel edge positions from (N, 4) chroma samples ordered from outside to inside.
+    """Sub-pixel edge positions from (N, 6) chroma samples ordered from outside to inside.
 
-    The samples are two background pixels, then the first two object pixels. The edge
-    is where the chroma crosses halfway between background and object, measured in
-    pixels from the outer boundary of the first object pixel (negative: further out).
-    Where the contrast is too low it stays on that boundary; it never moves by more than
-    one pixel.
+    The samples are three background pixels, then the first three pixels of the blob.
+    The levels are read at the ends, three pixels from the blob's boundary: a compressed
+    image (JPEG halves the colour resolution) smears colour across the edge, and levels
+    read closer in would pull the half level outwards. The edge is where the chroma
+    crosses halfway between the levels, measured in pixels from the outer boundary of
+    the blob's first pixel (negative: further out), on the crossing nearest it. Where the
+    contrast is too low it stays on that boundary; it never moves by more than one pixel.
     """
-    outside, a, b, c = values.T
-    inside = np.maximum(b, c)
-    half = 0.5 * (inside + outside)
-    rising = b >= half
-    # Crossing between the centres of the last background and first object pixel, or of the first two object pixels.
-    low = np.where(rising, a, b)
-    high = np.where(rising, b, c)
-    step = high - low
-    usable = (inside - outside >= _MIN_CONTRAST) & (step > 0)
-    offset = np.where(rising, -0.5, 0.5) + (half - low) / np.where(usable, step, 1.0)
+    outside = values[:, 0]
+    inside = np.maximum(values[:, -1], values[:, -2])
+    half = (0.5 * (inside + outside))[:, None]
+    low, high = values[:, :-1], values[:, 1:]
+    crosses = (low < half) & (high >= half)
+    # Sample k (k = 0 for the first blob pixel) is centred at k + 0.5; interval j runs from sample j - 3.
+    centres = np.arange(values.shape[1] - 1) - 2.5
+    step = np.where(crosses, high - low, 1.0)
+    positions = centres + np.where(crosses, (half - low) / step, 0.0)
+    distance = np.where(crosses, np.abs(positions), np.inf)
+    nearest = np.argmin(distance, axis=1)
+    offset = positions[np.arange(len(values)), nearest]
+    usable = (inside - outside >= _MIN_CONTRAST) & np.isfinite(distance.min(axis=1))
     return np.minimum(np.maximum(np.where(usable, offset, 0.0), -1.0), 1.0)
 
 
@@ -84,8 +90,8 @@ def silhouette_edges(
     steps = _OUTSIDE_IN
     gather_rows = np.concatenate(
         [
-            np.repeat(full, 4),
-            np.repeat(full, 4),
+            np.repeat(full, _SAMPLES),
+            np.repeat(full, _SAMPLES),
             (top[cols, None] + steps).ravel(),
             (bottom[cols, None] - steps).ravel(),
         ]
@@ -94,11 +100,11 @@ def silhouette_edges(
         [
             (first[full, None] + steps).ravel(),
             (last[full, None] - steps).ravel(),
-            np.repeat(cols, 4),
-            np.repeat(cols, 4),
+            np.repeat(cols, _SAMPLES),
+            np.repeat(cols, _SAMPLES),
         ]
     )
-    offsets = crossing_offsets(chroma_roi[gather_rows, gather_cols].reshape(-1, 4))
+    offsets = crossing_offsets(chroma_roi[gather_rows, gather_cols].reshape(-1, _SAMPLES))
     n_full, n_cols_present = len(full), len(cols)
     left_off = offsets[:n_full]
     right_off = offsets[n_full : 2 * n_full]
@@ -188,11 +194,11 @@ def measure(
     own = np.zeros((row_hi - row_lo, blob.cols + 2 * m), dtype=bool)
     own[blob.row0 - row_lo : blob.row0 - row_lo + blob.rows, m : m + blob.cols] = blob.mask
     roi = chroma(strip(rgb_panorama, slice(row_lo, row_hi), blob.col0 - m, blob.col0 + blob.cols + m))
-    if blob.row0 - row_lo < 2 or row_hi - (blob.row0 + blob.rows) < 2:
+    if blob.row0 - row_lo < m or row_hi - (blob.row0 + blob.rows) < m:
         # At the panorama's top or bottom there is no background to refine against: pad with none.
-        roi = np.pad(roi, ((2, 2), (0, 0)))
-        own = np.pad(own, ((2, 2), (0, 0)))
-        row_lo -= 2
+        roi = np.pad(roi, ((m, m), (0, 0)))
+        own = np.pad(own, ((m, m), (0, 0)))
+        row_lo -= m
     bottom_above_camera = bool(pano.row_elevation(blob.row0 + blob.rows) > 0.0)
     left, right, top, bottom = silhouette_edges(roi, own, bottom_above_camera)
     az_start = float(wrap_angle(pano.column_azimuth(blob.col0 - m + left)))

@@ -16,9 +16,8 @@ import threading
 import time
 from pathlib import Path
 
-from nav_msgs.msg import Odometry, Path as PathMsg
-from objslam_msgs.msg import BuildProgress, ObjectMap, SliceArray
-from objslam_msgs.srv import BuildMap
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -34,6 +33,8 @@ from objslam_mapper.ros.conversions import MessageError, image_slices, odometry_
 from objslam_mapper.ros.map_messages import time_from_ns, to_marker_array, to_object_map, to_path
 from objslam_mapper.ros.params import declare_config
 from objslam_mapper.ros.spin import run_node
+from objslam_msgs.msg import BuildProgress, ObjectMap, SliceArray
+from objslam_msgs.srv import BuildMap
 
 BUILD_SERVICE = "/objslam/build_map"
 RESET_SERVICE = "/objslam/reset"
@@ -91,7 +92,7 @@ class MapperNode(Node):
             with self._buffer_lock:
                 self.buffer.counters.invalid_odometry += 1
                 count = self.buffer.counters.invalid_odometry
-            self._warn("odometry", f"rejected an odometry message ({count} so far): {exc}")
+            self._warn(exc.kind, f"rejected an odometry message ({count} so far): {exc}")
             return
         with self._buffer_lock:
             resets = self.buffer.counters.time_resets
@@ -165,7 +166,7 @@ class MapperNode(Node):
         )
         try:
             built = build_map(odometry, images, config, self.catalog, progress=self._progress)
-        except Exception as exc:  # noqa: BLE001 -- any failure must leave the node (and the last map) intact
+        except Exception as exc:
             response.success = False
             response.message = f"build failed: {type(exc).__name__}: {exc}"
             self.get_logger().error(response.message)

@@ -8,6 +8,7 @@ own settings (``ros``, ignored by ``objslam map``).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -64,4 +65,6 @@ def build_map(
     progress: PhaseProgress | None = None,
 ) -> BuiltMap:
     """Odometry and slices to the object-based map (tracklets, MH over associations, Algorithm 1)."""
-    return _infer(odometry, images, catalog, graph=config.graph, sampler=config.sampler, progress=progress)
+    built = _infer(odometry, images, catalog, graph=config.graph, sampler=config.sampler, progress=progress)
+    inputs = {"odometry_messages": len(odometry), "slice_arrays": len(images)}
+    return dataclasses.replace(built, diagnostics={**inputs, **built.diagnostics})

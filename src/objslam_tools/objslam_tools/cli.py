@@ -11,11 +11,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
 
 from objslam_mapper.config import ConfigError
-
 from objslam_tools import commands
 from objslam_tools.errors import UserError
 
@@ -58,6 +58,10 @@ def main(argv: list[str] | None = None) -> int:
         return USER_ERROR_EXIT
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # The reader went away (`objslam echo ... | head`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

@@ -5,16 +5,24 @@ from __future__ import annotations
 import math
 
 from nav_msgs.msg import Odometry
-from objslam_msgs.msg import SliceArray
 
 from objslam_mapper.geometry import yaw_from_quaternion
 from objslam_mapper.records import ImageSlices, OdometrySample, RecordError, SliceMeasurement
+from objslam_msgs.msg import SliceArray
 
 QUATERNION_NORM_TOLERANCE = 1e-3
 
 
 class MessageError(ValueError):
-    """A message that cannot become a record (the node counts and drops it)."""
+    """A message that cannot become a record (the node counts and drops it).
+
+    ``kind`` names the problem without its numbers, so that warnings can be rate-limited
+    per kind of problem.
+    """
+
+    def __init__(self, kind: str, detail: str = ""):
+        super().__init__(f"{kind} ({detail})" if detail else kind)
+        self.kind = kind
 
 
 def stamp_ns(header) -> int:
@@ -28,11 +36,11 @@ def odometry_sample(msg: Odometry) -> OdometrySample:
         raise MessageError("odometry pose is not finite")
     norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
     if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
-        raise MessageError(f"odometry orientation is not a unit quaternion (norm {norm:.4f})")
+        raise MessageError("odometry orientation is not a unit quaternion", f"norm {norm:.4f}")
     try:
         return OdometrySample(stamp_ns(msg.header), float(p.x), float(p.y), yaw_from_quaternion(q.x, q.y, q.z, q.w))
     except RecordError as exc:
-        raise MessageError(str(exc)) from exc
+        raise MessageError("invalid odometry", str(exc)) from exc
 
 
 def image_slices(msg: SliceArray) -> tuple[ImageSlices, int]:

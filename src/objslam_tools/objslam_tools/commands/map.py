@@ -54,7 +54,9 @@ def run(args: argparse.Namespace) -> int:
     bag = open_bag(args.bag)
     params = args.params or default_config_dir() / "mapper.yaml"
     config = load_config(MapperConfig, params, "mapper")
-    overrides = {k: v for k, v in (("samples", args.samples), ("burn_in", args.burn_in), ("seed", args.seed)) if v is not None}
+    overrides = {
+        k: v for k, v in (("samples", args.samples), ("burn_in", args.burn_in), ("seed", args.seed)) if v is not None
+    }
     config = dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, **overrides))
     if config.sampler.burn_in >= config.sampler.samples:
         raise UserError(f"--burn-in ({config.sampler.burn_in}) must be below --samples ({config.sampler.samples})")

@@ -12,6 +12,10 @@ from objslam_tools.ros_util import import_message_type, ros_node
 
 logger = logging.getLogger(__name__)
 
+# Reliable delivery still loses what falls out of the publisher's history while a busy
+# subscriber lags; 1000 messages is 10 s of odometry at 100 Hz.
+PUBLISHER_DEPTH = 1000
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("play", help="publish a bag's topics with recorded timing and /clock")
@@ -43,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
 
     with ros_node("objslam_player") as node:
         publishers = {
-            topic: node.create_publisher(import_message_type(bag.topics[topic].msgtype), topic, QoSProfile(depth=100))
+            topic: node.create_publisher(
+                import_message_type(bag.topics[topic].msgtype), topic, QoSProfile(depth=PUBLISHER_DEPTH)
+            )
             for topic in topics
         }
         publish_clock = make_clock_publisher(node)
