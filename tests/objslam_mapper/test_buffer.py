@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from objslam_mapper.buffer import InputBuffer, NothingToBuild
+from objslam_mapper.buffer import InputBuffer, NothingToBuildError
 from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 
 SLICE = SliceMeasurement("red", 1.0, 0.1, 0.05, -0.2, 0.1)
@@ -16,14 +16,14 @@ def odom(t: int) -> OdometrySample:
 
 def test_missing_inputs_are_named():
     buffer = InputBuffer(10, 10)
-    with pytest.raises(NothingToBuild, match="no odometry and no slices"):
+    with pytest.raises(NothingToBuildError, match="no odometry and no slices"):
         buffer.snapshot()
     buffer.add_slices(ImageSlices(5, (SLICE,)))
-    with pytest.raises(NothingToBuild, match="no odometry received"):
+    with pytest.raises(NothingToBuildError, match="no odometry received"):
         buffer.snapshot()
     buffer.clear()
     buffer.add_odometry(odom(1))
-    with pytest.raises(NothingToBuild, match="no slices received"):
+    with pytest.raises(NothingToBuildError, match="no slices received"):
         buffer.snapshot()
 
 

@@ -16,7 +16,7 @@ from objslam_mapper.records import ImageSlices, OdometrySample
 logger = logging.getLogger(__name__)
 
 
-class NothingToBuild(ValueError):
+class NothingToBuildError(ValueError):
     """The buffers do not hold what a map build needs; the message says what is missing."""
 
 
@@ -80,19 +80,19 @@ class InputBuffer:
         self.images.append(image)
 
     def snapshot(self) -> tuple[tuple[OdometrySample, ...], tuple[ImageSlices, ...]]:
-        """What a build uses; NothingToBuild says what is missing.
+        """What a build uses; NothingToBuildError says what is missing.
 
         Slice arrays older than the first odometry cannot be placed and are left out (counted).
         """
         if not self.odometry and not self.images:
-            raise NothingToBuild("nothing buffered yet: no odometry and no slices received")
+            raise NothingToBuildError("nothing buffered yet: no odometry and no slices received")
         if not self.odometry:
-            raise NothingToBuild(f"no odometry received ({len(self.images)} slice arrays are waiting for it)")
+            raise NothingToBuildError(f"no odometry received ({len(self.images)} slice arrays are waiting for it)")
         if not self.images:
-            raise NothingToBuild(f"no slices received ({len(self.odometry)} odometry messages buffered)")
+            raise NothingToBuildError(f"no slices received ({len(self.odometry)} odometry messages buffered)")
         first_odometry_ns = self.odometry[0].stamp_ns
         images = tuple(i for i in self.images if i.stamp_ns >= first_odometry_ns)
         self.counters.slices_before_odometry = len(self.images) - len(images)
         if not images:
-            raise NothingToBuild("every slice array is older than the first odometry message")
+            raise NothingToBuildError("every slice array is older than the first odometry message")
         return tuple(self.odometry), images

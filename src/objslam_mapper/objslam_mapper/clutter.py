@@ -1,39 +1,58 @@
 r"""The false-alarm (clutter) model: the likelihood of a tracklet that is no object.
 
 Beyond the paper, an association may put a tracklet in the clutter set: its slices are
-then explained as false alarms of the detector instead of as views of an object. For the
-comparison with an object to be meaningful, both must be densities over the same
-measurements in the same units. The object side is the factor graph's Laplace evidence,
-which includes every Gaussian normalizer (:mod:`objslam_mapper.solver`): a density over
-each slice's 4-vector ``(bearing, angular width, elevation bottom, elevation top)`` in
-rad^-4. The clutter side is then a density over the same 4-vector:
+then explained by something that is not an object of the map. For the comparison with an
+object to be meaningful, both must be densities over the same measurements in the same
+units. The object side is the factor graph's Laplace evidence, which includes every
+Gaussian normalizer (:mod:`objslam_mapper.solver`): a density over each slice's 4-vector
+``(bearing, angular width, elevation bottom, elevation top)`` in rad^-4. The clutter side
+is a mixture of two densities over the same 4-vectors:
 
-False alarms of a class are a Poisson process with ``false_alarm_rate`` expected slices
-per image, each uniform over the measurement space
+independent false alarms (weight ``1 - distractor_weight``)
+    false alarms of a class are a Poisson process with ``false_alarm_rate`` expected
+    slices per image, each uniform over the measurement space
 
-    bearing in [-pi, pi),  width in (0, w_max],  e_min <= bottom <= top <= e_max,
+        bearing in [-pi, pi),  width in (0, w_max],  e_min <= bottom <= top <= e_max,
 
-whose volume is ``V = 2 pi * w_max * (e_max - e_min)^2 / 2`` rad^4. Up to factors that do
-not depend on the association (``exp(-rate)`` per image and class), a clutter slice
-contributes ``rate / V`` and a tracklet of ``n`` slices
+    of volume ``V = 2 pi * w_max * (e_max - e_min)^2 / 2`` rad^4. Up to factors that do
+    not depend on the association (``exp(-rate)`` per image and class), a tracklet of
+    ``n`` slices has ``log L = n (log rate - log V)``. With the default noise a slice that
+    fits an object is worth about ``+15`` nats to it (its Gaussian normalizer) against
+    ``-5.4`` here, so this only takes slices that fit no object at all.
 
-    log L_clutter = n * (log rate - log V).
+a static distractor (weight ``distractor_weight``)
+    a poster or a sign is seen consistently from image to image, which independent
+    false alarms are not; what gives it away is that it is not shaped or placed like an
+    object of its class (it floats, or is flat). It is modelled as a cylinder *of unknown
+    geometry*: the same slice model, but with broad priors on ``z_base`` and size
+    (``distractor_z_base_stddev_m``, ``distractor_size_stddev_m``) instead of the class
+    priors, and ``log L`` its Laplace evidence alone with the odometry chain (whose own
+    evidence is 0). A real object's tracklet prefers its class by the Occam factor of the
+    tighter priors (several nats); a poster that would need ``z_base`` tens of prior
+    standard deviations off the floor prefers the distractor by hundreds.
 
-An object's slices contribute their Gaussian densities with detection probability one
-(missed detections are not modelled, on either side). So a slice favours the clutter
-explanation only where the object explanation of it is poor: with the default noise a
-well-fitting slice is worth about ``+15`` nats to an object against ``-5.4`` to clutter,
-and a new object pays an Occam price of roughly 10-15 nats (its prior normalizer and
-``-1/2 log|information|``). A consistent but misfitting tracklet -- a poster on a wall
-seen as a floor object that would need to float, or be flat -- ends in clutter.
+    The distractor's evidence is computed with the trajectory to itself: the information
+    its slices carry about the robot's poses is not shared with the objects' graph. That
+    approximation leaves the object-or-distractor comparison of a tracklet as it is when
+    the tracklet moves the trajectory little, which is the case for the short or
+    misfitting tracklets it is about.
+
+Missed detections are modelled on neither side (an object is detected with probability
+one wherever it was seen).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
+from objslam_mapper.backends import solve_with_backend
 from objslam_mapper.config import setting
+from objslam_mapper.problem import GraphProblem, gaussian_log_normalizer
 
 
 @dataclass(frozen=True)
@@ -50,6 +69,15 @@ class ClutterConfig:
     )
     max_elevation_rad: float = setting(
         1.12, "... and below this (rad; the bundled camera sees up to asin(0.9) = 1.12)", maximum=math.pi / 2
+    )
+    distractor_weight: float = setting(
+        0.5, "share of a static distractor of unknown shape in the clutter mixture (0: off)", minimum=0.0, maximum=1.0
+    )
+    distractor_z_base_stddev_m: float = setting(
+        1.0, "prior stddev of a distractor's base height around its class's (m)", minimum=1e-3
+    )
+    distractor_size_stddev_m: float = setting(
+        0.5, "prior stddev of a distractor's diameter and height around its class's (m)", minimum=1e-3
     )
 
     def __post_init__(self) -> None:
@@ -70,3 +98,37 @@ class ClutterConfig:
     def log_likelihood(self, slice_count: int) -> float:
         """log L of a tracklet of ``slice_count`` slices explained as clutter."""
         return slice_count * self.log_likelihood_per_slice
+
+
+def distractor_problem(problem: GraphProblem, config: ClutterConfig) -> GraphProblem:
+    """``problem`` with every class's z_base and size priors widened to the distractor's."""
+    stddev = np.array(problem.prior_stddev)
+    stddev[:, 2] = config.distractor_z_base_stddev_m
+    stddev[:, 3:] = config.distractor_size_stddev_m
+    stddev.flags.writeable = False
+    normalizer = gaussian_log_normalizer(stddev)
+    normalizer.flags.writeable = False
+    return dataclasses.replace(problem, prior_stddev=stddev, prior_log_normalizer=normalizer)
+
+
+class ClutterModel:
+    """log L_clutter of tracklets of one problem (see the module docstring)."""
+
+    def __init__(self, problem: GraphProblem, config: ClutterConfig):
+        self.config = config
+        self._distractors = distractor_problem(problem, config) if config.distractor_weight > 0.0 else None
+
+    def distractor_log_evidence(self, measurement_indices: Sequence[int]) -> float:
+        if self._distractors is None:
+            return -math.inf
+        return solve_with_backend(self._distractors, [np.asarray(measurement_indices, dtype=np.int64)]).log_evidence
+
+    def tracklet_log_likelihood(self, measurement_indices: Sequence[int]) -> float:
+        w = self.config.distractor_weight
+        independent = self.config.log_likelihood(len(measurement_indices))
+        if w == 0.0:
+            return independent
+        distractor = self.distractor_log_evidence(measurement_indices)
+        if w == 1.0:
+            return distractor
+        return float(np.logaddexp(math.log1p(-w) + independent, math.log(w) + distractor))

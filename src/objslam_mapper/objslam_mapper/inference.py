@@ -34,7 +34,8 @@ from numpy.typing import NDArray
 
 from objslam_mapper.association import Association
 from objslam_mapper.catalog import Catalog
-from objslam_mapper.clutter import ClutterConfig
+from objslam_mapper.backends import solve_with_backend
+from objslam_mapper.clutter import ClutterConfig, ClutterModel
 from objslam_mapper.config import setting
 from objslam_mapper.graph_config import GraphConfig
 from objslam_mapper.map_file import BuiltMap
@@ -42,7 +43,7 @@ from objslam_mapper.mapbuild import SampleObject, SampleSummary, build_from_samp
 from objslam_mapper.problem import GraphProblem, build_problem
 from objslam_mapper.records import ImageSlices, OdometrySample
 from objslam_mapper.sampler import MetropolisHastings, MoveConfig
-from objslam_mapper.solver import GraphSolution, solve
+from objslam_mapper.solver import GraphSolution
 from objslam_mapper.tracklets import Tracklet, TrackletConfig, tracklets_of_problem
 
 logger = logging.getLogger(__name__)
@@ -100,12 +101,13 @@ class AssociationTarget:
     ):
         self.problem = problem
         self.tracklets = list(tracklets)
-        self.clutter = clutter
+        self.clutter = ClutterModel(problem, clutter)
         self.max_iterations = max_iterations
         self.cache_size = cache_size
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
         self._anchor: GraphSolution | None = None
+        self._clutter_log_likelihood: dict[int, float] = {}
         self.solves = 0
         self.solve_seconds = 0.0
 
@@ -113,8 +115,14 @@ class AssociationTarget:
         """Measurement indices of each object of ``state``, in its object order."""
         return [np.sort(np.concatenate([self._members[t] for t in group])) for group in state.groups]
 
+    def tracklet_clutter_log_likelihood(self, t: int) -> float:
+        """log L_clutter of tracklet t (one distractor solve, remembered)."""
+        if t not in self._clutter_log_likelihood:
+            self._clutter_log_likelihood[t] = self.clutter.tracklet_log_likelihood(self._members[t])
+        return self._clutter_log_likelihood[t]
+
     def clutter_log_likelihood(self, state: Association) -> float:
-        return sum(self.clutter.log_likelihood(len(self.tracklets[t])) for t in state.clutter)
+        return sum(self.tracklet_clutter_log_likelihood(t) for t in state.clutter)
 
     def solution(self, state: Association) -> GraphSolution:
         cached = self._solutions.get(state)
@@ -123,7 +131,9 @@ class AssociationTarget:
             return cached
         start = time.perf_counter()
         max_iterations = None if self._anchor is None else self.max_iterations
-        result = solve(self.problem, self.groups(state), warm_start=self._anchor, max_iterations=max_iterations)
+        result = solve_with_backend(
+            self.problem, self.groups(state), warm_start=self._anchor, max_iterations=max_iterations
+        )
         self.solve_seconds += time.perf_counter() - start
         self.solves += 1
         self._solutions[state] = result
@@ -145,7 +155,7 @@ class AssociationTarget:
         if state.n_objects == 0:
             return SampleSummary(map_T_base=np.array(self.problem.odometry_poses), objects=())
         warm = self._solutions.get(state, self._anchor)
-        result = solve(self.problem, self.groups(state), warm_start=warm, with_covariances=True)
+        result = solve_with_backend(self.problem, self.groups(state), warm_start=warm, with_covariances=True)
         objects = []
         for est in result.objects:
             nan3, nan2 = np.full((3, 3), np.nan), np.full((2, 2), np.nan)

@@ -25,7 +25,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from objslam_mapper.buffer import InputBuffer, NothingToBuild
+from objslam_mapper.buffer import InputBuffer, NothingToBuildError
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.map_file import BuiltMap, write_map
 from objslam_mapper.pipeline import MapperConfig, build_map
@@ -146,7 +146,7 @@ class MapperNode(Node):
         with self._buffer_lock:
             try:
                 odometry, images = self.buffer.snapshot()
-            except NothingToBuild as exc:
+            except NothingToBuildError as exc:
                 response.success = False
                 response.message = f"cannot build: {exc}"
                 self.get_logger().warn(response.message)
@@ -226,7 +226,8 @@ class MapperNode(Node):
 
     def summary(self) -> str:
         c = self.buffer.counters
-        return f"buffered {len(self.buffer.odometry)} odometry, {len(self.buffer.images)} slice arrays; dropped {c.dropped()}"
+        buffered = f"buffered {len(self.buffer.odometry)} odometry, {len(self.buffer.images)} slice arrays"
+        return f"{buffered}; dropped {c.dropped()}"
 
 
 def main(args: list[str] | None = None) -> int:

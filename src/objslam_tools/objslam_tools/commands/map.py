@@ -84,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
     for obj in built.objects:
         x, y, z = obj.position_m
         print(
-            f"  #{obj.id:<3} {obj.label:<7} x {x:7.2f}  y {y:7.2f}  z {z:5.2f}  "
-            f"d {obj.size_m[0]:.2f}  h {obj.size_m[1]:.2f}  P {obj.existence_probability:.2f}  n {obj.measurement_count}"
+            f"  #{obj.id:<3} {obj.label:<7} x {x:7.2f}  y {y:7.2f}  z {z:5.2f}  d {obj.size_m[0]:.2f}  "
+            f"h {obj.size_m[1]:.2f}  P {obj.existence_probability:.2f}  n {obj.measurement_count}"
         )
     if args.figures:
         from objslam_tools.figures import write_figures
