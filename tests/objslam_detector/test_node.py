@@ -22,7 +22,9 @@ def _first_message(stdout: str) -> dict:
 def test_playing_small_yields_slices_stamped_like_the_images(processes):
     bag = open_bag(BAGS / "small")
     image_stamps = {frame.stamp_ns for frame in bag.images()}
-    detector = processes.start(objslam_cmd("detector", "--ros-args", "-p", "use_compressed:=true"))
+    detector = processes.start(
+        objslam_cmd("detector", "--ros-args", "-p", "use_compressed:=true", "-p", "publish_debug_image:=true")
+    )
     processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "1.0", "--loop"))
     result = processes.run(objslam_cmd("echo", "/objslam/slices", "--once", "--timeout", "60"), timeout=90)
     assert detector.poll() is None, detector.stderr.read()
@@ -33,6 +35,13 @@ def test_playing_small_yields_slices_stamped_like_the_images(processes):
     for s in msg["slices"]:
         assert s["label"] in {"red", "green", "blue", "yellow", "cyan"}
         assert s["elevation_top"] >= s["elevation_bottom"]
+    debug = processes.run(
+        objslam_cmd("echo", "/objslam/detector/debug_image", "--once", "--timeout", "30", "--truncate-length", "4"),
+        timeout=60,
+    )
+    assert debug.returncode == 0, debug.stderr
+    image = _first_message(debug.stdout)
+    assert (image["width"], image["height"], image["encoding"]) == (640, 640, "rgb8")
 
 
 BAD_THEN_GOOD = textwrap.dedent(
@@ -52,7 +61,7 @@ BAD_THEN_GOOD = textwrap.dedent(
         msg.header.frame_id = "camera"
         msg.data = bytes(width * height * channels)
         return msg
-    for _ in range(10):  # before any camera info
+    for _ in range(20):  # before any camera info (best effort: send plenty)
         raw_pub.publish(image("rgb8", 640, 640, 3))
         time.sleep(0.1)
     info = CameraInfo(width=640, height=640, distortion_model="unified", d=[0.9])
@@ -61,7 +70,7 @@ BAD_THEN_GOOD = textwrap.dedent(
         info_pub.publish(info)
         time.sleep(0.05)
     for bad in (image("yuv422", 640, 640, 2), image("rgb8", 320, 320, 3), image("rgb8", 0, 0, 3)):
-        for _ in range(3):
+        for _ in range(5):
             raw_pub.publish(bad)
             time.sleep(0.1)
     for _ in range(100):

@@ -9,7 +9,7 @@ import pytest
 
 from objslam_mapper.association import CLUTTER, Association, enumerate_associations
 from objslam_mapper.catalog import load_catalog
-from objslam_mapper.clutter import ClutterConfig
+from objslam_mapper.clutter import ClutterConfig, ClutterModel
 from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.inference import (
     NO_OBJECT_LOG_EVIDENCE,
@@ -23,7 +23,7 @@ from objslam_mapper.sampler import ExactDistribution, MetropolisHastings
 from objslam_mapper.solver import solve
 from objslam_mapper.tracklets import Tracklet, tracklets_of_problem
 
-from .association_scenes import GREEN, RED_A, RED_B, problem_of, simulate, with_poster
+from .association_scenes import GREEN, POSTER_FRAMES, RED_A, RED_B, problem_of, simulate, with_poster
 
 QUICK = SamplerConfig(samples=500, burn_in=150)
 
@@ -67,15 +67,41 @@ def test_odometry_chain_alone_has_zero_log_evidence(scene):
 def test_target_is_evidence_plus_clutter_likelihood(scene):
     _run, problem, chained = scene
     clutter = ClutterConfig()
+    model = ClutterModel(problem, clutter)
     target = AssociationTarget(problem, chained.tracklets, clutter)
+    members = [list(t.measurement_indices) for t in chained.tracklets]
     green = chained.labels.index("green")
-    state = Association.of([CLUTTER if t == green else t for t in range(len(chained.tracklets))])
-    groups = [list(chained.tracklets[t].measurement_indices) for t in range(len(chained.tracklets)) if t != green]
-    expected = solve(problem, groups).log_evidence + len(chained.tracklets[green]) * clutter.log_likelihood_per_slice
+    state = Association.of([CLUTTER if t == green else t for t in range(len(members))])
+    groups = [m for t, m in enumerate(members) if t != green]
+    expected = solve(problem, groups).log_evidence + model.tracklet_log_likelihood(members[green])
     assert target(state) == pytest.approx(expected, abs=1e-6)
-    all_clutter = Association.of([CLUTTER] * len(chained.tracklets))
-    slices = sum(len(t) for t in chained.tracklets)
-    assert target(all_clutter) == pytest.approx(slices * clutter.log_likelihood_per_slice)
+    all_clutter = Association.of([CLUTTER] * len(members))
+    assert target(all_clutter) == pytest.approx(sum(model.tracklet_log_likelihood(m) for m in members))
+
+
+def test_clutter_mixes_independent_false_alarms_and_a_distractor(scene):
+    _run, problem, chained = scene
+    members = list(chained.tracklets[0].measurement_indices)
+    config = ClutterConfig(distractor_weight=0.25)
+    model = ClutterModel(problem, config)
+    independent = len(members) * config.log_likelihood_per_slice
+    distractor = model.distractor_log_evidence(members)
+    mixture = np.log(0.75 * np.exp(independent - distractor) + 0.25) + distractor
+    assert model.tracklet_log_likelihood(members) == pytest.approx(mixture)
+    off = ClutterModel(problem, dataclasses.replace(config, distractor_weight=0.0))
+    assert off.tracklet_log_likelihood(members) == pytest.approx(independent)
+    # A real object's tracklet is better explained by its class than by a shapeless distractor.
+    assert solve(problem, [members]).log_evidence > distractor > independent
+
+
+def test_a_distractor_explains_a_floating_poster_far_better_than_its_class():
+    run = simulate()
+    problem = problem_of(run, with_poster(run))
+    poster = [m for m in range(problem.measurement_count) if problem.measurement_image[m] in POSTER_FRAMES]
+    poster = [m for m in poster if problem.measurement_slot[m] == len(run.images[problem.measurement_image[m]].slices)]
+    assert len(poster) == len(POSTER_FRAMES)
+    distractor = ClutterModel(problem, ClutterConfig()).distractor_log_evidence(poster)
+    assert distractor > solve(problem, [poster]).log_evidence + 100.0
 
 
 @pytest.mark.slow

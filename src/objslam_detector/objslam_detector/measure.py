@@ -7,7 +7,7 @@ crosses halfway between the object's level and the background's: blending a colo
 a grey scales its chroma, so the half-level crossing is where the object covers half a
 pixel, whatever the gate's saturation floor. The left and right edges are averaged over
 the rows of full width (each row samples the original pixel grid at another phase); the
-top and bottom come from the extreme row's columns.
+top and bottom come from a quadratic fitted to the rim over the central columns.
 """
 
 from __future__ import annotations
@@ -73,9 +73,9 @@ def silhouette_edges(
     """Left, right, top, bottom edges (ROI pixel-boundary coordinates) of a blob with a margin of background.
 
     Left and right are means over the rows where the blob is (nearly) widest; top and
-    bottom come from the central columns (``_extreme``); only a lower edge above the camera
-    can be the rim of a wider table in front, extreme at the sides. All samples are gathered at
-    once: blobs are small and numerous, so the number of array operations is what costs.
+    bottom come from the central columns (``_extreme``); only a lower edge above the
+    camera can be the rim of a wider table in front, extreme at the sides. All samples
+    are gathered at once: blobs are small and numerous, and array calls are what costs.
     """
     n_rows, n_cols = own.shape
     rows_present = own.any(axis=1)

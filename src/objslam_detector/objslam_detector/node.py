@@ -20,6 +20,7 @@ from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_detector.errors import DetectorInputError
 from objslam_detector.images import decode_compressed, image_from_buffer
+from objslam_detector.overlay import draw_slices
 from objslam_detector.slices import DetectedSlice
 from objslam_mapper.camera import CameraModelError, UnifiedCamera
 from objslam_mapper.catalog import load_catalog
@@ -54,6 +55,7 @@ class DetectorNode(Node):
         self.config = declare_config(self, DetectorConfig)
         catalog = load_catalog(self.config.catalog_file or None)
         self.detector = Detector(self.config, catalog)
+        self.class_rgb = {c.label: c.color_rgb for c in catalog}
         self.camera: UnifiedCamera | None = None
         self.skipped: Counter[str] = Counter()
         self.processed = 0
@@ -129,12 +131,7 @@ class DetectorNode(Node):
             self._publish_debug(header, image, encoding, slices)
 
     def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[DetectedSlice]) -> None:
-        from objslam_detector.images import as_color_image
-        from objslam_detector.overlay import draw_slices
-
-        color = as_color_image(image, encoding)
-        rgb = color.pixels if color.order == "rgb" else color.pixels[..., ::-1]
-        drawn = np.ascontiguousarray(draw_slices(rgb, slices, self.camera))
+        drawn = draw_slices(image, slices, self.camera, encoding, self.class_rgb)
         msg = Image(
             header=header, height=drawn.shape[0], width=drawn.shape[1], encoding="rgb8", step=drawn.shape[1] * 3
         )

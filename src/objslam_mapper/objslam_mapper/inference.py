@@ -33,8 +33,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_mapper.association import Association
-from objslam_mapper.catalog import Catalog
 from objslam_mapper.backends import solve_with_backend
+from objslam_mapper.catalog import Catalog
 from objslam_mapper.clutter import ClutterConfig, ClutterModel
 from objslam_mapper.config import setting
 from objslam_mapper.graph_config import GraphConfig

@@ -21,8 +21,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--params", metavar="FILE", default=None, help="detector parameter file (ROS 2 params YAML)")
     parser.add_argument("--frames", type=int, default=None, metavar="N", help="score at most N images")
     parser.add_argument("--every", type=int, default=1, metavar="K", help="score every K-th image (default 1)")
-    parser.add_argument("--min-width-px", type=float, default=6.0, help="narrowest object counted as visible")
-    parser.add_argument("--overlays", metavar="DIR", default=None, help="write overlays of frames with misses here")
+    parser.add_argument(
+        "--min-width-px", type=float, default=6.0, metavar="PX", help="narrowest object counted as visible (default 6)"
+    )
+    parser.add_argument(
+        "--overlays",
+        metavar="DIR",
+        default=None,
+        help="write up to 20 images of frames with a miss, a duplicate or an unexplained slice "
+        "(detections in class colours, ground truth in white)",
+    )
     parser.add_argument("--json", action="store_true", help="print machine-readable JSON instead of tables")
     parser.set_defaults(func=run)
 
