@@ -64,9 +64,9 @@ class SamplerConfig:
     samples: int = setting(6000, "MH steps in all, burn-in included (paper: 6000)", minimum=1)
     burn_in: int = setting(2500, "first steps left out of the map (paper: 2500)", minimum=0)
     seed: int = setting(1, "random seed of the chain (same seed, same inputs: same map)", minimum=0)
-    moves: MoveConfig = setting(MoveConfig(), "proposal moves")  # noqa: RUF009
-    tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets")  # noqa: RUF009
-    clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model")  # noqa: RUF009
+    moves: MoveConfig = setting(MoveConfig(), "proposal moves")
+    tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets")
+    clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model")
     spurious_location_stddev_m: float = setting(
         0.30, "an object whose horizontal location stddev (largest axis) exceeds this is spurious (m)", minimum=0.0
     )

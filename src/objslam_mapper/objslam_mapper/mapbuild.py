@@ -58,7 +58,7 @@ class SampleObject:
 class SampleSummary:
     """What Algorithm 1 needs of one association sample."""
 
-    map_T_base: NDArray[np.float64]  # (N, 3)  # noqa: N815 (frame-naming convention)
+    map_T_base: NDArray[np.float64]  # (N, 3)
     objects: tuple[SampleObject, ...]
 
 

@@ -223,8 +223,8 @@ class _View:
 class Proposal:
     kind: str
     view: _View
-    log_q_forward: float  # log P(kind) q(J -> J'), in the current state
-    log_q_reverse: float  # log P(reverse kind) q(J' -> J), in the proposed state
+    log_q_forward: float  # log P(kind | J) q(J -> J'), in the current state
+    log_q_reverse: float  # log P(reverse kind | J') q(J' -> J), in the proposed state
 
 
 class MetropolisHastings:
