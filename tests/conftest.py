@@ -49,9 +49,7 @@ class Processes:
         self.started: list[subprocess.Popen] = []
 
     def start(self, args: list[str], **kwargs) -> subprocess.Popen:
-        proc = subprocess.Popen(
-            args, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs
-        )
+        proc = subprocess.Popen(args, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
         self.started.append(proc)
         return proc
 

@@ -64,3 +64,22 @@ def test_flatten_round_trips_through_unflatten():
     flat = flatten(config)
     assert flat["noise.bearing_rad"] == (0.2, "bearing noise")
     assert from_mapping(Component, unflatten({k: v for k, (v, _d) in flat.items()})) == config
+
+
+def _parameter_names(section: dict, prefix: str = "") -> set[str]:
+    names: set[str] = set()
+    for key, value in section.items():
+        names |= _parameter_names(value, f"{prefix}{key}.") if isinstance(value, dict) else {prefix + key}
+    return names
+
+
+def test_bundled_mapper_parameter_file_lists_every_parameter_at_its_default(repo_root):
+    """config/mapper.yaml is the mapper's documentation: every parameter, at its default."""
+    import yaml
+
+    from objslam_mapper.pipeline import MapperConfig
+
+    path = repo_root / "config" / "mapper.yaml"
+    section = yaml.safe_load(path.read_text())["mapper"]["ros__parameters"]
+    assert _parameter_names(section) == set(flatten(MapperConfig()))
+    assert load_config(MapperConfig, path, "mapper") == MapperConfig()

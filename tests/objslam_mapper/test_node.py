@@ -54,9 +54,9 @@ def test_build_with_nothing_buffered_says_what_is_missing(processes, mapper):
 
 
 def test_bag_through_the_nodes_gives_the_one_process_map(processes, mapper, tmp_path):
-    processes.start(objslam_cmd("detector", "--ros-args", "-p", "use_compressed:=true"))
+    processes.start(objslam_cmd("detector", "--ros-args", "-p", "use_compressed:=true", "-p", "reliable_images:=true"))
     time.sleep(3.0)  # discovery before the first message, so nothing is lost
-    player = processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "2.0", "--rate", "2.0"))
+    player = processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "2.0", "--rate", "1.0"))
     assert player.wait(timeout=120) == 0
     time.sleep(3.0)  # let the detector finish the last frames
     code, response = _call(processes, "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED))

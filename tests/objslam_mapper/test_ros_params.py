@@ -58,7 +58,7 @@ def test_overrides_are_validated(rcl):
 def test_out_of_range_override_is_a_config_error(rcl):
     node = rclpy.create_node("params_bad", parameter_overrides=[Parameter("inner.sigma_rad", value=-1.0)])
     try:
-        with pytest.raises(ConfigError, match="inner.sigma_rad"):
+        with pytest.raises(ConfigError, match=r"inner\.sigma_rad"):
             declare_config(node, Outer)
     finally:
         node.destroy_node()

@@ -90,7 +90,11 @@ class DetectorConfig:
     use_compressed: bool = setting(False, "subscribe to IMAGE_TOPIC/compressed (sensor_msgs/CompressedImage) instead")
     camera_info_topic: str = setting("/camera/camera_info", "calibration topic (sensor_msgs/CameraInfo, 'unified')")
     publish_debug_image: bool = setting(False, "publish the image with the slices drawn on it")
+    reliable_images: bool = setting(
+        False,
+        "subscribe to images with reliable QoS (no frame lost from a played bag) instead of sensor-data best effort",
+    )
     # Frozen nested defaults are immutable, so sharing one instance is safe.
-    panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping")  # noqa: RUF009
-    color: ColorConfig = setting(ColorConfig(), "colour gates")  # noqa: RUF009
-    blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates")  # noqa: RUF009
+    panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping")
+    color: ColorConfig = setting(ColorConfig(), "colour gates")
+    blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates")

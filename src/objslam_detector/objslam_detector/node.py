@@ -13,7 +13,7 @@ from collections import Counter
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from objslam_detector.config import DetectorConfig
@@ -70,12 +70,14 @@ class DetectorNode(Node):
         self.create_subscription(
             CameraInfo, self.config.camera_info_topic, self.on_camera_info, qos_profile_sensor_data
         )
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        image_qos = reliable if self.config.reliable_images else qos_profile_sensor_data
         if self.config.use_compressed:
             topic = self.config.image_topic.rstrip("/") + "/compressed"
-            self.create_subscription(CompressedImage, topic, self.on_compressed, qos_profile_sensor_data)
+            self.create_subscription(CompressedImage, topic, self.on_compressed, image_qos)
         else:
             topic = self.config.image_topic
-            self.create_subscription(Image, topic, self.on_raw, qos_profile_sensor_data)
+            self.create_subscription(Image, topic, self.on_raw, image_qos)
         self.get_logger().info(
             f"detecting {', '.join(catalog.labels)} on {topic}; slices on {SLICES_TOPIC}"
             + (f", debug image on {DEBUG_IMAGE_TOPIC}" if self.debug_pub else "")

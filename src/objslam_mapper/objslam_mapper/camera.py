@@ -86,7 +86,7 @@ class UnifiedCamera:
     @classmethod
     def from_camera_info(
         cls, width: int, height: int, distortion_model: str, d: ArrayLike, k: ArrayLike
-    ) -> "UnifiedCamera":
+    ) -> UnifiedCamera:
         """Build from the fields of sensor_msgs/CameraInfo (passed as plain values)."""
         if distortion_model != "unified":
             raise CameraModelError(f"distortion_model must be 'unified', got {distortion_model!r}")

@@ -123,10 +123,10 @@ class SolverConfig:
 class GraphConfig:
     """Everything the factor graph needs besides the catalog."""
 
-    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")  # noqa: RUF009
-    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")  # noqa: RUF009
-    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")  # noqa: RUF009
-    solver: SolverConfig = setting(SolverConfig(), "known-association solver")  # noqa: RUF009
+    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")
+    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")
+    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")
+    solver: SolverConfig = setting(SolverConfig(), "known-association solver")
 
 
 GRAPH_SECTIONS = tuple(f.name for f in dataclasses.fields(GraphConfig))

@@ -59,7 +59,7 @@ from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.normal_equations import Layout, layout_of
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
-from objslam_mapper.solver import GraphSolution, _initial_state, _solution
+from objslam_mapper.solver import GraphSolution, initial_state, make_solution
 
 logger = logging.getLogger(__name__)
 
@@ -429,7 +429,7 @@ def solve_gtsam(
     if drive not in DRIVES:
         raise GtsamBackendError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
     layout = layout_of(problem, groups)
-    poses, objects = _initial_state(problem, layout, warm_start)
+    poses, objects = initial_state(problem, layout, warm_start)
     valid = predict_reduced(
         poses[layout.pose_of],
         objects[layout.object_of, :3],
@@ -439,7 +439,7 @@ def solve_gtsam(
     ).valid
     if not np.all(valid):
         logger.debug("GTSAM solve cannot start: a pose lies inside an object's starting cylinder")
-        return _solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None)
+        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None)
 
     graph, keys = _build(problem, layout, per_detection, window_poses)
     cfg = problem.solver
@@ -474,7 +474,7 @@ def solve_gtsam(
             -1, OBJECT_DIM, OBJECT_DIM
         )
     poses, objects = keys.from_values(driven.values)
-    return _solution(
+    return make_solution(
         problem,
         layout,
         poses,

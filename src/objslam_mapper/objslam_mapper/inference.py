@@ -18,6 +18,20 @@ one move) and capped at ``proposal_max_iterations``: a hopeless proposal (a merg
 objects metres apart) then costs a few iterations and is rejected on the evidence at its
 last iterate, which is below its optimum. Values are cached per state, so the chain
 sees one fixed target whatever path led to a state.
+
+Most proposals are hopeless (a few percent are accepted), so the chain screens them first
+(delayed acceptance, :mod:`objslam_mapper.sampler`) with :meth:`AssociationTarget.screen`:
+with the poses fixed at the current state's MAP the graph splits into one small problem
+per object (:mod:`objslam_mapper.conditional_evidence`), and the difference of two
+associations one move apart is the conditional evidence of the few objects the move
+changes, plus the exact clutter terms. Only a proposal that passes that screen costs a
+graph solve, and the second stage corrects for the screen, so the chain's target is still
+exactly ``log P(J | Z)`` above (the screen is loosened by ``screen_margin_nats`` and
+``screen_relative_margin`` and floored at ``screen_floor``: a loop closure needs the poses
+to move, which a screen at fixed poses cannot see). What stays approximate is what was
+already: each state's value is its solve's, cached, and the screen's reference poses are
+those of a state's first solve (cached for the last 1024 states; an evicted one is
+re-solved from the chain's current state, which agrees to the solver's tolerance).
 """
 
 from __future__ import annotations
@@ -36,8 +50,10 @@ from objslam_mapper.association import Association
 from objslam_mapper.backends import solve_with_backend
 from objslam_mapper.catalog import Catalog
 from objslam_mapper.clutter import ClutterConfig, ClutterModel
+from objslam_mapper.conditional_evidence import object_evidence
 from objslam_mapper.config import setting
 from objslam_mapper.graph_config import GraphConfig
+from objslam_mapper.initialization import initial_object
 from objslam_mapper.map_file import BuiltMap
 from objslam_mapper.mapbuild import SampleObject, SampleSummary, build_from_samples
 from objslam_mapper.problem import GraphProblem, build_problem
@@ -53,6 +69,9 @@ logger = logging.getLogger(__name__)
 # unit Jacobian determinant, the Laplace evidence -cost + sum of normalizers + d/2 log 2 pi
 # - 1/2 log|Lambda| is exactly 0. Computed here rather than solved: such a state needs no graph.
 NO_OBJECT_LOG_EVIDENCE = 0.0
+
+_REFERENCE_CACHE_SIZE = 1024
+_OBJECT_EVIDENCE_CACHE_SIZE = 100_000
 
 PhaseProgress = Callable[[str, int, int], None]  # phase ("tracklets", "sampling", "mapping"), done, total
 
@@ -81,6 +100,21 @@ class SamplerConfig:
     )
     proposal_max_iterations: int = setting(15, "most solver linearizations per proposed association", minimum=1)
     solution_cache_size: int = setting(256, "graph solutions kept for warm starts and map building", minimum=1)
+    screen_proposals: bool = setting(
+        True, "delayed acceptance: screen proposals on the moved objects alone (poses fixed) before a graph solve"
+    )
+    screen_margin_nats: float = setting(
+        5.0, "the screen lets through proposals it judges worse by up to this much (nats)", minimum=0.0
+    )
+    screen_relative_margin: float = setting(
+        0.1, "... or by up to this fraction of its log ratio, whichever is larger", minimum=0.0
+    )
+    screen_floor: float = setting(
+        0.1,
+        "a proposal the screen condemns still gets a graph solve with this probability (loop closures)",
+        minimum=1e-6,
+        maximum=1.0,
+    )
 
     def __post_init__(self) -> None:
         if self.burn_in >= self.samples:
@@ -98,18 +132,30 @@ class AssociationTarget:
         *,
         max_iterations: int | None = None,
         cache_size: int = 256,
+        screen_iterations: int = 20,
     ):
         self.problem = problem
         self.tracklets = list(tracklets)
         self.clutter = ClutterModel(problem, clutter)
         self.max_iterations = max_iterations
         self.cache_size = cache_size
+        self.screen_iterations = screen_iterations
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
         self._anchor: GraphSolution | None = None
         self._clutter_log_likelihood: dict[int, float] = {}
+        # Per state: the poses and objects its screens are conditioned on (its MAP when first solved).
+        self._references: OrderedDict[Association, tuple[NDArray, NDArray, NDArray]] = OrderedDict()
+        self._object_evidence: OrderedDict[tuple[Association, tuple[int, ...]], float] = OrderedDict()
         self.solves = 0
         self.solve_seconds = 0.0
+        self.screens = 0
+        self.screen_seconds = 0.0  # conditional object solves only
+        self.marginal_solves = 0
+        self.marginal_seconds = 0.0
+        self.object_solves = 0
+        self.clutter_seconds = 0.0
+        self.clutter_solves = 0  # one distractor solve per tracklet, ever: it does not depend on J
 
     def groups(self, state: Association) -> list[NDArray[np.int64]]:
         """Measurement indices of each object of ``state``, in its object order."""
@@ -118,7 +164,10 @@ class AssociationTarget:
     def tracklet_clutter_log_likelihood(self, t: int) -> float:
         """log L_clutter of tracklet t (one distractor solve, remembered)."""
         if t not in self._clutter_log_likelihood:
+            start = time.perf_counter()
             self._clutter_log_likelihood[t] = self.clutter.tracklet_log_likelihood(self._members[t])
+            self.clutter_solves += 1
+            self.clutter_seconds += time.perf_counter() - start
         return self._clutter_log_likelihood[t]
 
     def clutter_log_likelihood(self, state: Association) -> float:
@@ -146,6 +195,68 @@ class AssociationTarget:
             return NO_OBJECT_LOG_EVIDENCE + self.clutter_log_likelihood(state)
         return self.solution(state).log_evidence + self.clutter_log_likelihood(state)
 
+    # ---- the screen (first stage of delayed acceptance) --------------------------------
+    def _reference(self, state: Association) -> tuple[NDArray, NDArray, NDArray]:
+        """(poses (N, 3), owner object of each measurement (M,), objects (K, 5)) of ``state``'s MAP."""
+        cached = self._references.get(state)
+        if cached is not None:
+            self._references.move_to_end(state)
+            return cached
+        if state.n_objects == 0:
+            owners = np.full(self.problem.measurement_count, -1, dtype=np.int64)
+            reference = (np.asarray(self.problem.odometry_poses), owners, np.zeros((0, 5)))
+        else:
+            sol = self.solution(state)
+            objects = np.array([np.concatenate([o.location_m, o.size_m]) for o in sol.objects])
+            reference = (np.asarray(sol.map_T_base), sol.object_of_measurement, objects)
+        self._references[state] = reference
+        if len(self._references) > _REFERENCE_CACHE_SIZE:
+            self._references.popitem(last=False)
+        return reference
+
+    def _conditional_log_evidence(self, state: Association, group: tuple[int, ...]) -> float:
+        """log e(group) with the poses fixed at ``state``'s MAP (conditional_evidence)."""
+        key = (state, group)
+        cached = self._object_evidence.get(key)
+        if cached is not None:
+            return cached
+        poses, owners, objects = self._reference(state)
+        members = np.sort(np.concatenate([self._members[t] for t in group]))
+        owned = owners[members]
+        owned = owned[owned >= 0]
+        starts = [objects[int(np.argmax(np.bincount(owned)))]] if len(owned) else []
+        starts.append(None)
+        value = -np.inf
+        for start in starts:
+            if start is None:
+                start = initial_object(self.problem, members, poses)
+            self.object_solves += 1
+            started = time.perf_counter()
+            value = object_evidence(self.problem, poses, members, start, max_iterations=self.screen_iterations)
+            self.screen_seconds += time.perf_counter() - started
+            value = value.log_evidence
+            if np.isfinite(value):
+                break
+        self._object_evidence[key] = value
+        if len(self._object_evidence) > _OBJECT_EVIDENCE_CACHE_SIZE:
+            self._object_evidence.popitem(last=False)
+        return value
+
+    def screen(self, state: Association, new: Association) -> float:
+        """Approximate ``log P(new|Z) - log P(state|Z)``: poses fixed at ``state``'s MAP.
+
+        The objects both associations share cancel, so only those the move changes are
+        solved (5 variables each); the clutter terms are the exact ones of the target.
+        A fixed function of the pair (cached), as delayed acceptance needs.
+        """
+        self.screens += 1
+        old_groups, new_groups = set(state.groups), set(new.groups)
+        gained = sum(self._conditional_log_evidence(state, g) for g in new_groups - old_groups)
+        lost = sum(self._conditional_log_evidence(state, g) for g in old_groups - new_groups)
+        value = gained - lost if np.isfinite(lost) else -np.inf
+        value += self.clutter_log_likelihood(new) - self.clutter_log_likelihood(state)
+        return float(value)
+
     def move_to(self, state: Association) -> None:
         """The chain is now in ``state``: warm-start later solves from its solution."""
         self._anchor = self._solutions.get(state, self._anchor)
@@ -155,7 +266,10 @@ class AssociationTarget:
         if state.n_objects == 0:
             return SampleSummary(map_T_base=np.array(self.problem.odometry_poses), objects=())
         warm = self._solutions.get(state, self._anchor)
+        started = time.perf_counter()
         result = solve_with_backend(self.problem, self.groups(state), warm_start=warm, with_covariances=True)
+        self.marginal_seconds += time.perf_counter() - started
+        self.marginal_solves += 1
         objects = []
         for est in result.objects:
             nan3, nan2 = np.full((3, 3), np.nan), np.full((2, 2), np.nan)
@@ -240,6 +354,10 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         positions_xy_m=[t.position_xy_m for t in chained.tracklets],
         tracklet_weights=[len(t) for t in chained.tracklets],
         allow_clutter=config.clutter.enabled,
+        screen=target.screen if config.screen_proposals else None,
+        screen_margin=config.screen_margin_nats,
+        screen_relative_margin=config.screen_relative_margin,
+        screen_floor=config.screen_floor,
     )
     start = initial_association(chained.tracklets, config.initial_merge_distance_m)
     chain = sampler.run(
@@ -264,6 +382,9 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
     diagnostics["best_state_objects"] = chain.best_state.n_objects
     diagnostics["best_state_clutter_tracklets"] = len(chain.best_state.clutter)
     diagnostics["solves"] = target.solves
+    diagnostics["screens"] = target.screens
+    diagnostics["object_solves"] = target.object_solves
+    diagnostics["clutter_solves"] = target.clutter_solves
     built = build_from_samples(
         summaries(),
         problem.stamps_ns,
@@ -273,11 +394,22 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         diagnostics=diagnostics,
     )
     total = time.perf_counter() - started
+    mapping_seconds = total - tracklet_seconds - sampling_seconds
+    built.diagnostics["marginal_solves"] = target.marginal_solves  # known once Algorithm 1 has run
+    # Phases that add up to the total: the solves of the chain are timed where they happen
+    # (a screen may need its reference state's solve, counted under solves).
     built.diagnostics["timings_s"] = {
         "tracklets": round(tracklet_seconds, 3),
         "sampling": round(sampling_seconds, 3),
         "solving_during_sampling": round(target.solve_seconds, 3),
-        "mapping": round(total - tracklet_seconds - sampling_seconds, 3),
+        "screening": round(target.screen_seconds, 3),
+        "clutter_solves": round(target.clutter_seconds, 3),
+        "proposals_and_chain": round(
+            sampling_seconds - target.solve_seconds - target.screen_seconds - target.clutter_seconds, 3
+        ),
+        "mapping": round(mapping_seconds, 3),
+        "marginals": round(target.marginal_seconds, 3),
+        "map_building": round(mapping_seconds - target.marginal_seconds, 3),
         "total": round(total, 3),
     }
     logger.info(

@@ -229,7 +229,10 @@ _OBJECT_COLUMNS = np.array([0, 1, 3, 4, 5])
 def _bin_sum(bins: NDArray[np.int64], values: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.float64]:
     """Sum ``values`` into a zero array of ``shape`` at the flat positions ``bins`` (same shape as values)."""
     size = int(np.prod(shape))
-    return np.bincount(bins.ravel(), weights=values.ravel(), minlength=size).reshape(shape)
+    # bincount of an empty input is int64 whatever the weights: a graph without slices
+    # (no objects) would then get integer blocks.
+    summed = np.bincount(bins.ravel(), weights=values.ravel(), minlength=size)
+    return summed.astype(np.float64, copy=False).reshape(shape)
 
 
 class AssociationSystem:

@@ -43,12 +43,12 @@ class RosConfig:
 @dataclass(frozen=True)
 class MapperConfig:
     catalog_file: str = setting("", "class catalog file; empty = the bundled config/catalog.yaml")
-    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")  # noqa: RUF009
-    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")  # noqa: RUF009
-    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")  # noqa: RUF009
-    solver: SolverConfig = setting(SolverConfig(), "known-association solver")  # noqa: RUF009
-    sampler: SamplerConfig = setting(SamplerConfig(), "association sampler and map building")  # noqa: RUF009
-    ros: RosConfig = setting(RosConfig(), "mapper node topics, buffers and outputs")  # noqa: RUF009
+    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")
+    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")
+    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")
+    solver: SolverConfig = setting(SolverConfig(), "known-association solver")
+    sampler: SamplerConfig = setting(SamplerConfig(), "association sampler and map building")
+    ros: RosConfig = setting(RosConfig(), "mapper node topics, buffers and outputs")
 
     @property
     def graph(self) -> GraphConfig:

@@ -17,6 +17,25 @@ taking J to J' and its reverse m' taking J' back, the acceptance is
 which gives detailed balance move pair by move pair, so the chain's stationary law is pi
 (Green, 1995). Reverse proposal probabilities are always computed in the proposed state.
 
+Delayed acceptance (Christen and Fox, 2005). Given a ``screen(J, J')`` approximating
+``log pi(J') - log pi(J)`` cheaply (the sampler's target is costly), a proposal first
+passes a screening stage with ``alpha_1(J, J') = min(1, exp(screen(J, J')) P(m'|J') q_m' /
+(P(m|J) q_m))``; only a proposal that passes has its target computed, and is accepted with
+
+    alpha_2 = min(1, pi(J') P(m'|J') q_m'(J' -> J) alpha_1(J', J) / (pi(J) P(m|J) q_m(J -> J') alpha_1(J, J'))).
+
+The product ``q alpha_1 alpha_2`` satisfies detailed balance for pi itself, whatever the
+screen (it may even depend on the current state, as long as it is a fixed function of
+the pair), so the chain still targets pi exactly; a good screen only makes it cheaper,
+a poor one makes it mix slower. In fact any first stage ``alpha_1`` in (0, 1] works; the
+sampler loosens the screen, ``alpha_1 = max(floor, min(1, exp(a + max(margin,
+relative_margin |a|))))`` with ``a`` the log ratio above: the margins because a screen that
+errs by a few percent on a move worth thousands of nats (a poster leaving the map drags
+the whole trajectory) would otherwise make the second stage reject moves the target
+loves, the floor because a screen can be wrong in kind (a loop closure needs the poses to
+move, which a screen with fixed poses cannot see): a proposal it condemns still reaches
+the target now and then, so the chain is never slower than plain MH by more than 1/floor.
+
 Proposals are geometry aware when rough tracklet positions are given: merges and
 reassignments prefer nearby objects, splits separate tracklets that are far apart. The
 weights only depend on the state and the fixed tracklet positions, and a floor keeps every
@@ -44,6 +63,7 @@ from objslam_mapper.config import setting
 logger = logging.getLogger(__name__)
 
 LogTarget = Callable[[Association], float]
+Screen = Callable[[Association, Association], float]  # approximate log pi(J') - log pi(J)
 Progress = Callable[[int, int], None]
 
 MOVE_KINDS = ("merge", "split", "reassign", "to_clutter", "from_clutter")
@@ -128,6 +148,7 @@ class MoveConfig:
 class MoveStats:
     proposed: int = 0  # proposals that changed the state
     accepted: int = 0
+    screened_out: int = 0  # rejected by the screen (delayed acceptance), target never computed
 
     @property
     def acceptance_rate(self) -> float:
@@ -166,6 +187,7 @@ class ChainResult:
             "acceptance_rate": round(self.overall_acceptance_rate, 4),
             "acceptance_rates": {k: round(v, 4) for k, v in self.acceptance_rates.items()},
             "proposals": {k: s.proposed for k, s in self.moves.items()},
+            "screened_out": {k: s.screened_out for k, s in self.moves.items()},
             "distinct_associations_visited": self.distinct_visited,
             "distinct_associations_kept": len(self.counts),
             "target_evaluations": self.target_evaluations,
@@ -232,6 +254,7 @@ class MetropolisHastings:
 
     ``positions_xy_m`` (T, 2) are rough tracklet positions used only to shape proposals,
     ``tracklet_weights`` (T,) weigh them in object centroids (e.g. slices per tracklet).
+    ``screen``, if given, makes each step a delayed-acceptance step (module docstring).
     """
 
     def __init__(
@@ -242,8 +265,18 @@ class MetropolisHastings:
         positions_xy_m: ArrayLike | None = None,
         tracklet_weights: ArrayLike | None = None,
         allow_clutter: bool = True,
+        screen: Screen | None = None,
+        screen_margin: float = 0.0,
+        screen_relative_margin: float = 0.0,
+        screen_floor: float = 0.0,
     ):
         self.labels = list(labels)
+        self.screen = screen
+        self.screen_margin = screen_margin
+        self.screen_relative_margin = screen_relative_margin
+        if not 0.0 <= screen_floor <= 1.0:
+            raise SamplerError(f"screen_floor must lie in [0, 1], got {screen_floor}")
+        self._log_screen_floor = math.log(screen_floor) if screen_floor > 0.0 else -math.inf
         self.moves = moves or MoveConfig()
         n = len(self.labels)
         self.positions = np.zeros((n, 2)) if positions_xy_m is None else np.asarray(positions_xy_m, float).reshape(n, 2)
@@ -475,6 +508,32 @@ class MetropolisHastings:
         return getattr(self, f"_propose_{kinds.draw(rng)}")(view, rng)
 
     # ---- the chain ---------------------------------------------------------------
+    def _log_acceptance(
+        self, state: Association, log_p: float, proposal: Proposal, rng: np.random.Generator
+    ) -> float | None:
+        """log of the acceptance probability of ``proposal`` from ``state`` (whose log target
+        is ``log_p``); None when the screen rejected it (its target is then never computed)."""
+        new = proposal.view.state
+        log_q = proposal.log_q_reverse - proposal.log_q_forward
+        if self.screen is None:
+            return self.target(new) - log_p + log_q
+        log_first = self._first_stage(self.screen(state, new) + log_q)
+        if not (log_first >= 0.0 or math.log(rng.random()) < log_first):
+            return None
+        log_p_new = self.target(new)
+        if log_p_new == -math.inf:
+            return -math.inf
+        log_back = self._first_stage(self.screen(new, state) - log_q)
+        return log_p_new - log_p + log_q + log_back - log_first
+
+    def _first_stage(self, log_ratio: float) -> float:
+        """log alpha_1 of a screen log ratio: loosened by the margins, clamped to [log floor, 0]."""
+        if math.isfinite(log_ratio):
+            log_ratio += max(self.screen_margin, self.screen_relative_margin * abs(log_ratio))
+        elif math.isnan(log_ratio):
+            log_ratio = -math.inf
+        return max(self._log_screen_floor, min(0.0, log_ratio))
+
     def check_state(self, state: Association) -> None:
         if state.n_tracklets != len(self.labels):
             raise SamplerError(f"state has {state.n_tracklets} tracklets, the sampler {len(self.labels)}")
@@ -520,11 +579,12 @@ class MetropolisHastings:
             if proposal is not None:
                 kind = proposal.kind
                 stats[kind].proposed += 1
-                log_p_new = self.target(proposal.view.state)
-                log_alpha = log_p_new - log_p + proposal.log_q_reverse - proposal.log_q_forward
-                if log_alpha >= 0.0 or math.log(rng.random()) < log_alpha:
+                log_alpha = self._log_acceptance(view.state, log_p, proposal, rng)
+                if log_alpha is None:
+                    stats[kind].screened_out += 1
+                elif log_alpha >= 0.0 or math.log(rng.random()) < log_alpha:
                     stats[kind].accepted += 1
-                    view, log_p = proposal.view, log_p_new
+                    view, log_p = proposal.view, self.target(proposal.view.state)
                     visited.add(view.state)
                     if on_move is not None:
                         on_move(view.state)

@@ -81,7 +81,7 @@ class GraphSolution:
     ``object_of_measurement`` (M,) gives each measurement's object number, -1 if none.
     """
 
-    map_T_base: NDArray[np.float64]  # (N, 3)  # noqa: N815 (frame-naming convention)
+    map_T_base: NDArray[np.float64]  # (N, 3)
     objects: tuple[ObjectEstimate, ...]
     object_of_measurement: NDArray[np.int64]
     iterations: int
@@ -91,7 +91,7 @@ class GraphSolution:
     log_det_information: float
 
 
-def _initial_state(problem: GraphProblem, layout: Layout, warm_start: GraphSolution | None) -> tuple[NDArray, NDArray]:
+def initial_state(problem: GraphProblem, layout: Layout, warm_start: GraphSolution | None) -> tuple[NDArray, NDArray]:
     if warm_start is None:
         poses = np.array(problem.odometry_poses)
     else:
@@ -146,12 +146,12 @@ def solve(
     """
     layout = layout_of(problem, groups)
     graph = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
-    poses, objects = _initial_state(problem, layout, warm_start)
+    poses, objects = initial_state(problem, layout, warm_start)
 
     lin = graph.linearize(poses, objects)
     if not lin.valid:
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
-        return _solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None)
+        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
     poses, objects, lin, final, iterations, converged = _minimize(graph, poses, objects, lin, problem.solver, limit)
     if final is None:
@@ -161,7 +161,7 @@ def solve(
 
     log_evidence = -lin.cost + graph.log_normalizer + 0.5 * graph.dimension * LOG_2PI - 0.5 * final.log_det
     covariance = graph.object_covariance(final) if with_covariances else None
-    return _solution(
+    return make_solution(
         problem, layout, poses, objects, iterations, converged, log_evidence, 2.0 * lin.cost, final.log_det, covariance
     )
 
@@ -217,7 +217,7 @@ def _minimize(
     return poses, objects, lin, None, iterations, False
 
 
-def _solution(
+def make_solution(
     problem: GraphProblem,
     layout: Layout,
     poses: NDArray,

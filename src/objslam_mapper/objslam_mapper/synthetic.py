@@ -40,7 +40,7 @@ class SyntheticRun:
 
     odometry: tuple[OdometrySample, ...]
     images: tuple[ImageSlices, ...]
-    true_map_T_base: NDArray[np.float64]  # (N, 3) at the image stamps  # noqa: N815 (frame-naming convention)
+    true_map_T_base: NDArray[np.float64]  # (N, 3) at the image stamps
     objects: tuple[SyntheticObject, ...]
     slice_object: tuple[tuple[int, ...], ...]  # per image, the object number of each slice
 

@@ -74,7 +74,7 @@ def load_reference(bag_path: str | Path) -> Reference:
 class Alignment:
     """gt_T_map and how well the trajectories agree after it."""
 
-    gt_T_map: NDArray[np.float64]  # (x, y, theta)  # noqa: N815 (frame-naming convention)
+    gt_T_map: NDArray[np.float64]  # (x, y, theta)
     ate_m: float  # RMSE of xy after alignment
     pose_count: int
 

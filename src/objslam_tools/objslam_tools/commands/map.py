@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+ASSOCIATIONS = ("sampler", "greedy", "none", "oracle")
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -25,6 +27,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
     parser.add_argument("--detector-params", metavar="FILE", default=None, help="detector parameters")
     parser.add_argument("--figures", metavar="DIR", default=None, help="also write the pictures here")
+    parser.add_argument(
+        "--association",
+        choices=ASSOCIATIONS,
+        default="sampler",
+        help=(
+            "data association: sampler (MCMC, default); baselines mapped by the same factor graph: "
+            "greedy (nearest neighbour, Mahalanobis gate), none (every tracklet its own object), "
+            "oracle (ground truth; simulated bags only)"
+        ),
+    )
     parser.set_defaults(func=run)
 
 
@@ -61,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
     if config.sampler.burn_in >= config.sampler.samples:
         raise UserError(f"--burn-in ({config.sampler.burn_in}) must be below --samples ({config.sampler.samples})")
     catalog = load_catalog(config.catalog_file or None)
+    oracle_truth = _oracle_truth(bag) if args.association == "oracle" else None
     cv2.setNumThreads(1)
     detector = Detector(load_config(DetectorConfig, args.detector_params, "detector"), catalog)
 
@@ -73,13 +86,33 @@ def run(args: argparse.Namespace) -> int:
         if phase == "sampling":
             sampling(done, total)
 
-    built = build_map(odometry, images, config, catalog, progress=progress)
+    if args.association == "sampler":
+        built = build_map(odometry, images, config, catalog, progress=progress)
+    elif args.association == "oracle":
+        from objslam_tools.oracle_map import build_oracle_map
+
+        built = build_oracle_map(odometry, images, catalog, config, *oracle_truth)
+    else:
+        from objslam_mapper.baselines import build_baseline_map
+
+        associating = StderrProgress("associating", unit="tracklets")
+        built = build_baseline_map(
+            odometry,
+            images,
+            catalog,
+            args.association,
+            graph=config.graph,
+            sampler=config.sampler,
+            progress=lambda phase, done, total: associating(done, total) if phase == "association" else None,
+        )
     elapsed = time.monotonic() - started
-    built = dataclasses.replace(built, diagnostics={**built.diagnostics, "wall_time_s": round(elapsed, 3)})
+    built = dataclasses.replace(
+        built, diagnostics={**built.diagnostics, "association": args.association, "wall_time_s": round(elapsed, 3)}
+    )
     write_map(out, built)
     print(
-        f"map: {len(built.objects)} objects ({len(built.rejected)} rejected) from {len(images)} images "
-        f"and {len(odometry)} odometry messages in {elapsed:.1f} s -> {out}"
+        f"map ({args.association}): {len(built.objects)} objects ({len(built.rejected)} rejected) "
+        f"from {len(images)} images and {len(odometry)} odometry messages in {elapsed:.1f} s -> {out}"
     )
     for obj in built.objects:
         x, y, z = obj.position_m
@@ -94,3 +127,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"figures: {', '.join(str(p) for p in paths)}")
     sys.stdout.flush()
     return 0
+
+
+def _oracle_truth(bag):
+    """Ground truth and /ground_truth/odom of a simulated bag, checked before the long work starts."""
+    from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC
+    from objslam_tools.errors import UserError
+    from objslam_tools.ground_truth import GROUND_TRUTH_FILE, load_ground_truth
+
+    if not (bag.directory / GROUND_TRUTH_FILE).is_file():
+        raise UserError(f"--association oracle needs the bag's ground truth: no {GROUND_TRUTH_FILE} in {bag.directory}")
+    truth = load_ground_truth(bag.directory)
+    if not bag.has_topic(GROUND_TRUTH_ODOM_TOPIC):
+        raise UserError(f"--association oracle needs {GROUND_TRUTH_ODOM_TOPIC}, which bag {bag.path} lacks")
+    return truth, bag.read_odometry(GROUND_TRUTH_ODOM_TOPIC)

@@ -1,0 +1,75 @@
+"""The oracle baseline: the map of the ground-truth data association of a simulated bag.
+
+Each slice is given the real object that explains it by :func:`objslam_tools.oracle.oracle_assignment`
+(ground-truth poses and objects; slices no real object explains are distractors or noise).
+To change only the association, the oracle sees the same measurements as the sampler and
+the other baselines: those chained into tracklets (isolated detections are dropped before
+any association). Those measurements are grouped by their real object, slices of no object
+are left out (clutter), and the map is one known-association solve with marginals
+(:func:`objslam_mapper.baselines.map_of_groups`). It lives here, not in the core, because
+the core never reads ground truth.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+from objslam_mapper.baselines import map_of_groups
+from objslam_mapper.catalog import Catalog
+from objslam_mapper.map_file import BuiltMap
+from objslam_mapper.pipeline import MapperConfig
+from objslam_mapper.problem import GraphProblem, build_problem
+from objslam_mapper.records import ImageSlices, OdometrySample
+from objslam_mapper.tracklets import tracklets_of_problem
+from objslam_tools.ground_truth import GroundTruth
+from objslam_tools.oracle import OracleOptions, oracle_assignment
+from objslam_tools.trajectory import PoseTrack
+
+
+def oracle_groups(
+    problem: GraphProblem,
+    images: Sequence[ImageSlices],
+    ground_truth: GroundTruth,
+    ground_truth_track: PoseTrack,
+    measurements: Sequence[int] | None = None,
+    options: OracleOptions | None = None,
+) -> dict[int, list[int]]:
+    """Real object id -> the problem's measurement indices it explains (of ``measurements``, default all)."""
+    ids = oracle_assignment(images, ground_truth, ground_truth_track, options)
+    keep = range(problem.measurement_count) if measurements is None else sorted(set(measurements))
+    groups: dict[int, list[int]] = {}
+    for m in keep:
+        object_id = ids[int(problem.measurement_image[m])][int(problem.measurement_slot[m])]
+        if object_id is not None:
+            groups.setdefault(object_id, []).append(int(m))
+    return groups
+
+
+def build_oracle_map(
+    odometry: Sequence[OdometrySample],
+    images: Sequence[ImageSlices],
+    catalog: Catalog,
+    config: MapperConfig,
+    ground_truth: GroundTruth,
+    ground_truth_track: PoseTrack,
+) -> BuiltMap:
+    """Odometry and slices to the map of the ground-truth association (module docstring)."""
+    started = time.perf_counter()
+    graph = config.graph
+    problem = build_problem(odometry, images, graph.camera_mount.to_mount(), catalog, graph)
+    chained = tracklets_of_problem(problem, config.sampler.tracklets)
+    in_tracklets = [m for t in chained.tracklets for m in t.measurement_indices]
+    groups = oracle_groups(problem, images, ground_truth, ground_truth_track, in_tracklets)
+    diagnostics = {
+        "association": "oracle",
+        "poses": problem.pose_count,
+        "measurements": problem.measurement_count,
+        "tracklets": len(chained.tracklets),
+        "isolated_dropped": len(chained.dropped_measurements),
+        "association_objects": len(groups),
+        "clutter_measurements": len(in_tracklets) - sum(len(g) for g in groups.values()),
+    }
+    built = map_of_groups(problem, [groups[k] for k in sorted(groups)], config.sampler, diagnostics)
+    built.diagnostics["timings_s"] = {"total": round(time.perf_counter() - started, 3)}
+    return built

@@ -1,0 +1,82 @@
+"""objslam_tools.oracle_map and ``objslam map --association``: the ground-truth association's map."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from objslam_mapper.camera import CameraMount
+from objslam_mapper.catalog import load_catalog
+from objslam_mapper.pipeline import MapperConfig
+from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
+from objslam_mapper.slice_model import predict_slices
+from objslam_tools.cli import main
+from objslam_tools.evaluate import Reference, score_map
+from objslam_tools.ground_truth import GroundTruth
+from objslam_tools.oracle_map import build_oracle_map
+from objslam_tools.trajectory import PoseTrack, transform_poses
+from tests.objslam_tools import synthetic_scene as scene
+
+TRUTH = GroundTruth(objects=scene.OBJECTS, distractors=scene.DISTRACTORS)
+STAMPS, POSES = scene.ground_truth_poses()
+GT_TRACK = PoseTrack(STAMPS, POSES)
+ODOM_POSES = transform_poses(scene._inverse(scene.GT_T_ODOM), scene.drifting_odometry(POSES))
+NOISE_RAD = np.array([0.003, 0.006, 0.005, 0.005])
+
+
+def _inputs(seed: int = 3):
+    """Slices of every real object from the true poses (small noise), plus a poster's slice in each image."""
+    rng = np.random.default_rng(seed)
+    objs = TRUTH.objects
+    images = []
+    for stamp, pose in zip(STAMPS, POSES, strict=True):
+        pred = predict_slices(
+            pose, [o.position_m for o in objs], [o.size_m for o in objs], CameraMount(), jacobians=False
+        )
+        slices = []
+        for values, valid, obj in zip(pred.values, pred.valid, objs, strict=True):
+            if valid:
+                b, w, lo, hi = values + rng.normal(0.0, NOISE_RAD)
+                slices.append(SliceMeasurement(obj.label, 1.0, float(b), float(w), float(lo), float(hi)))
+        # A yellow poster (no yellow object exists), fixed in the image: chains into tracklets.
+        slices.append(SliceMeasurement("yellow", 1.0, 1.0, 0.15, 0.2, 0.35))
+        images.append(ImageSlices(int(stamp), tuple(slices)))
+    odometry = tuple(OdometrySample(int(s), *map(float, p)) for s, p in zip(STAMPS, ODOM_POSES, strict=True))
+    return odometry, images
+
+
+def test_oracle_map_matches_ground_truth():
+    odometry, images = _inputs()
+    built = build_oracle_map(odometry, images, load_catalog(), MapperConfig(), TRUTH, GT_TRACK)
+    assert built.diagnostics["association"] == "oracle"
+    # The poster's chained slices are explained by no real object: left out, not a yellow object.
+    assert 0 < built.diagnostics["clutter_measurements"] <= len(images)
+    assert not built.rejected and all(o.existence_probability == 1.0 for o in built.objects)
+    assert sorted(o.label for o in built.objects) == sorted(o.label for o in TRUTH.objects)
+
+    odom_track = PoseTrack(STAMPS, ODOM_POSES)
+    score = score_map(built, Reference(TRUTH, GT_TRACK, odom_track), gate_m=0.5)
+    m = score.metrics()
+    assert m["precision"] == 1.0 and m["recall"] == 1.0
+    assert m["xy_error_max_m"] < 0.05
+    assert m["diameter_error_mean_m"] < 0.03 and m["height_error_mean_m"] < 0.03
+    assert m["trajectory_ate_m"] < 0.5 * m["odometry_ate_m"]
+
+
+def test_oracle_on_a_bag_without_ground_truth_is_one_line_exit_2(tmp_path, capsys):
+    bag = scene.write_scene_bag(tmp_path / "bag")
+    (bag / "ground_truth.yaml").unlink()
+    code = main(["map", str(bag), "--out", str(tmp_path / "map.yaml"), "--association", "oracle"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "--association oracle needs the bag's ground truth" in err
+    assert not (tmp_path / "map.yaml").exists()
+
+
+@pytest.mark.parametrize("choice", ["bogus"])
+def test_unknown_association_is_refused(tmp_path, capsys, choice):
+    with pytest.raises(SystemExit) as exc:
+        main(["map", str(tmp_path), "--out", str(tmp_path / "m.yaml"), "--association", choice])
+    assert exc.value.code == 2
+    assert "invalid choice" in capsys.readouterr().err
