@@ -8,12 +8,6 @@ BAG="${BAG:-bags/office}"
 OUT="${OUT:-out/$(basename "$BAG")}"
 mkdir -p "$OUT"
 
-if ! objslam map --help >/dev/null 2>&1; then
-  echo "demo: 'objslam map' is not implemented yet; only the detector report runs." >&2
-  objslam eval-detector "$BAG"
-  exit 0
-fi
-
 objslam map "$BAG" --out "$OUT/map.yaml" --figures "$OUT"
 objslam eval "$OUT/map.yaml" --bag "$BAG"
 echo

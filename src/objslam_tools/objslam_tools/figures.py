@@ -2,7 +2,7 @@
 
 - :func:`top_down_figure`: the map seen from above in its ``odom`` frame: each object a
   circle of its diameter in its class colour with opacity = existence probability, its
-  2-sigma xy covariance ellipse, the trajectory, rejected identities dashed and crossed,
+  2-sigma xy covariance ellipse, the trajectory, rejected identities dashed and crossed (unlabelled),
   and, when the ground truth is known, the real objects (dashed black circles) and
   distractors brought into the map frame by the same SE(2) alignment ``objslam eval`` uses.
 - :func:`overlay_figure`: the map's objects projected back into one omnidirectional image
@@ -138,10 +138,11 @@ def top_down_figure(
         if ellipse is not None:
             ellipse.set_zorder(5)
             ax.add_patch(ellipse)
-        ax.annotate(
-            f"{obj.id} P={obj.existence_probability:.2f}", tuple(xy), xytext=(radius * 0 + 6, 6),
-            textcoords="offset points", fontsize=7, color="0.1", zorder=7,
-        )  # fmt: skip
+        if not rejected:  # rejected identities often pile up where one real object is: their labels would hide it
+            ax.annotate(
+                f"{obj.id} P={obj.existence_probability:.2f}", tuple(xy), xytext=(6, 6),
+                textcoords="offset points", fontsize=7, color="0.1", zorder=7,
+            )  # fmt: skip
         points.append(xy[None, :] + np.array([[-radius, -radius], [radius, radius]]))
 
     for obj in built_map.rejected:
