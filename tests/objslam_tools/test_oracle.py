@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from objslam_mapper.camera import CameraMount
 from objslam_mapper.records import ImageSlices, SliceMeasurement
 from objslam_mapper.slice_model import predict_slices
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject
-from objslam_tools.oracle import oracle_assignment
+from objslam_tools.oracle import OracleOptions, oracle_assignment, truth_residual_chi2
 from objslam_tools.trajectory import PoseTrack
 from tests.objslam_tools import synthetic_scene as scene
 
@@ -90,3 +91,28 @@ def test_wrong_elevation_or_stamp_outside_is_unexplained():
     ok = _slice(o.label, (b, w, lo, hi))
     images = [ImageSlices(int(STAMPS[0]), (high, ok)), ImageSlices(int(STAMPS[-1] + 10**9), (ok,)), ImageSlices(0)]
     assert oracle_assignment(images, TRUTH, TRACK) == [(None, o.id), (None,), ()]
+
+
+def test_truth_residual_chi2_is_the_normalized_squared_residual():
+    objs = scene.OBJECTS
+    poses = POSES[: len(objs)]
+    positions, sizes = [o.position_m for o in objs], [o.size_m for o in objs]
+    exact = predict_slices(poses, positions, sizes, CameraMount(), jacobians=False).values
+    stddev = np.tile([0.006, 0.012, 0.01, 0.15], (len(objs), 1))
+    assert np.allclose(truth_residual_chi2(exact, stddev, poses, positions, sizes, CameraMount()), 0.0, atol=1e-18)
+    # k stddevs off in one component: chi2 = k^2; the bearing's residual is wrapped (2 pi apart is no error).
+    off = exact.copy()
+    off[:, 0] += 3.0 * stddev[:, 0] + 2.0 * np.pi
+    off[:, 3] -= 2.0 * stddev[:, 3]
+    chi2 = truth_residual_chi2(off, stddev, poses, positions, sizes, CameraMount())
+    assert chi2 == pytest.approx(np.full(len(objs), 13.0), rel=1e-9)
+    # A camera inside the object: no model prediction, never consistent.
+    inside = truth_residual_chi2(exact[:1], stddev[:1], POSES[0], (*POSES[0, :2], 0.0), (0.5, 0.5), CameraMount())
+    assert np.isinf(inside).all()
+
+
+def test_residual_gate_is_the_chi_square_quantile_of_four_dof():
+    # Chi-square with 4 dof has the survival function exp(-x/2) (1 + x/2).
+    for p in (0.99, 0.999):
+        x = OracleOptions(residual_gate_probability=p).residual_gate_chi2
+        assert np.exp(-x / 2) * (1 + x / 2) == pytest.approx(1.0 - p, rel=1e-9)

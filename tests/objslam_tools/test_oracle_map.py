@@ -8,12 +8,13 @@ import pytest
 from objslam_mapper.camera import CameraMount
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.pipeline import MapperConfig
+from objslam_mapper.problem import build_problem
 from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.slice_model import predict_slices
 from objslam_tools.cli import main
 from objslam_tools.evaluate import Reference, score_map
 from objslam_tools.ground_truth import GroundTruth
-from objslam_tools.oracle_map import build_oracle_map
+from objslam_tools.oracle_map import build_oracle_map, oracle_groups
 from objslam_tools.trajectory import PoseTrack, transform_poses
 from tests.objslam_tools import synthetic_scene as scene
 
@@ -24,8 +25,12 @@ ODOM_POSES = transform_poses(scene._inverse(scene.GT_T_ODOM), scene.drifting_odo
 NOISE_RAD = np.array([0.003, 0.006, 0.005, 0.005])
 
 
-def _inputs(seed: int = 3):
-    """Slices of every real object from the true poses (small noise), plus a poster's slice in each image."""
+def _inputs(seed: int = 3, merged_images: range = range(0)):
+    """Slices of every real object from the true poses (small noise), plus a poster's slice in each image.
+
+    In ``merged_images`` the blue object's blob is merged with a blue sign beside it: the slice
+    is widened by 0.2 rad on one side (its bearing moves by half of that).
+    """
     rng = np.random.default_rng(seed)
     objs = TRUTH.objects
     images = []
@@ -37,6 +42,8 @@ def _inputs(seed: int = 3):
         for values, valid, obj in zip(pred.values, pred.valid, objs, strict=True):
             if valid:
                 b, w, lo, hi = values + rng.normal(0.0, NOISE_RAD)
+                if obj.label == "blue" and len(images) in merged_images:
+                    b, w = b + 0.1, w + 0.2
                 slices.append(SliceMeasurement(obj.label, 1.0, float(b), float(w), float(lo), float(hi)))
         # A yellow poster (no yellow object exists), fixed in the image: chains into tracklets.
         slices.append(SliceMeasurement("yellow", 1.0, 1.0, 0.15, 0.2, 0.35))
@@ -80,3 +87,26 @@ def test_unknown_association_is_refused(tmp_path, capsys, choice):
         main(["map", str(tmp_path), "--out", str(tmp_path / "m.yaml"), "--association", choice])
     assert exc.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_merged_blobs_are_left_out_of_the_known_association():
+    merged = range(20, 35)
+    odometry, images = _inputs(merged_images=merged)
+    config = MapperConfig()
+    problem = build_problem(odometry, images, config.graph.camera_mount.to_mount(), load_catalog(), config.graph)
+    groups, inconsistent = oracle_groups(problem, images, TRUTH, GT_TRACK)
+    blue = next(o.id for o in TRUTH.objects if o.label == "blue")
+    merged_slices = {
+        m
+        for m in range(problem.measurement_count)
+        if problem.measurement_image[m] in merged and problem.label_of(m) == "blue"
+    }
+    # The oracle's geometric gates take the merged slices (the sectors overlap); the model's gate does not.
+    assert len(merged_slices) == len(merged) and inconsistent == len(merged)
+    assert not merged_slices & set(groups[blue])
+    assert sum(len(g) for g in groups.values()) == problem.measurement_count - len(images) - len(merged)
+
+    built = build_oracle_map(odometry, images, load_catalog(), config, TRUTH, GT_TRACK)
+    assert built.diagnostics["inconsistent_measurements"] > 0
+    score = score_map(built, Reference(TRUTH, GT_TRACK, PoseTrack(STAMPS, ODOM_POSES)), gate_m=0.5)
+    assert score.metrics()["xy_error_max_m"] < 0.05

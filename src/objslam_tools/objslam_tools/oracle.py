@@ -16,6 +16,23 @@ chosen, one slice per object and image first (Hungarian, so two slices of two ne
 same-class objects do not both go to the nearer one); a slice left over that still
 passes the test (an object split in two blobs by an occluder) goes to its best candidate.
 Slices that nothing explains (distractors, noise) get ``None``.
+
+These gates only say which object a slice *is of*; they are loose on purpose (sector
+overlap, table-cut bottoms). A slice of an object's blob merged with a same-colour poster,
+sign or neighbour passes them, yet it is no measurement of the object in the graph's
+model: its bearing and extent are the union's. Known data association for the factor graph
+means the association under its measurement model, so :func:`truth_residual_chi2` scores
+each assigned slice against its object's prediction at the true pose, in the model's own
+noise (``problem.measurement_stddev``: the slice noise, inflated for low confidence and for
+raised bottoms), and :mod:`objslam_tools.oracle_map` leaves slices beyond the chi-square
+gate (4 dof, ``residual_gate_probability``) out as clutter. The prediction at the truth has
+no estimation error, so a correct slice's ``chi2`` is the measurement noise alone. On the
+five bundled scenarios the kept slices have median ``chi2`` ~0.05 and 99th percentile < 5;
+1-6 % of the assigned slices are rejected (median ``chi2`` 40-450): blobs merged with a
+same-class neighbour beside them (``twins``: wider, bearing pulled aside) or with a poster
+behind them (``office``, ``clutter``: mostly the elevation top is the poster's).
+Left in, they bias the trajectory and with it every object (on ``office``: median xy error
+0.053 m instead of 0.029 m, mean NEES xy 9.6 instead of 2.4, ATE 0.054 m instead of 0.022 m).
 """
 
 from __future__ import annotations
@@ -26,11 +43,13 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
 
+from objslam_mapper.camera import CameraMount
 from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_slices
+from objslam_mapper.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_slices, slice_error
 from objslam_tools.ground_truth import GroundTruth
 from objslam_tools.trajectory import PoseTrack
 
@@ -56,6 +75,11 @@ class ImageSlicesLike(Protocol):
 class OracleOptions:
     bearing_gate_rad: float = 0.1  # bearing agreement accepted even without sector overlap
     elevation_margin_rad: float = 0.1  # widening of the predicted elevation interval
+    residual_gate_probability: float = 0.999  # chi-square (4 dof) gate of a slice's residual at the truth
+
+    @property
+    def residual_gate_chi2(self) -> float:
+        return float(chi2.ppf(self.residual_gate_probability, df=4))
 
 
 def _measured(slices: Sequence[SliceLike]) -> NDArray[np.float64]:
@@ -141,3 +165,23 @@ def oracle_assignment(
     if outside:
         logger.warning("%d images lie outside the ground-truth trajectory: their slices are unassigned", outside)
     return result
+
+
+def truth_residual_chi2(
+    measured: ArrayLike,
+    stddev: ArrayLike,
+    map_T_base: ArrayLike,
+    location_m: ArrayLike,
+    size_m: ArrayLike,
+    mount: CameraMount,
+) -> NDArray[np.float64]:
+    """(M,) squared normalized residual of slices against their objects' predictions at the truth.
+
+    ``measured`` and ``stddev`` (M, 4) as in the factor graph; ``map_T_base`` (M, 3) the true
+    poses, ``location_m`` (M, 3) and ``size_m`` (M, 2) the true objects (rows broadcast).
+    Predictions outside the model's domain (camera inside the object) give inf.
+    """
+    measured = np.atleast_2d(np.asarray(measured, dtype=float))
+    pred = predict_slices(map_T_base, location_m, size_m, mount, jacobians=False)
+    normalized = slice_error(pred.values, measured) / np.atleast_2d(np.asarray(stddev, dtype=float))
+    return np.where(pred.valid, np.sum(normalized * normalized, axis=1), np.inf)

@@ -4,16 +4,21 @@ Each slice is given the real object that explains it by :func:`objslam_tools.ora
 (ground-truth poses and objects; slices no real object explains are distractors or noise).
 To change only the association, the oracle sees the same measurements as the sampler and
 the other baselines: those chained into tracklets (isolated detections are dropped before
-any association). Those measurements are grouped by their real object, slices of no object
-are left out (clutter), and the map is one known-association solve with marginals
+any association). Those measurements are grouped by their real object; slices of no object,
+and slices the model cannot explain from their object at the truth (merged blobs:
+:func:`objslam_tools.oracle.truth_residual_chi2`), are left out (clutter), and the map is
+one known-association solve with marginals
 (:func:`objslam_mapper.baselines.map_of_groups`). It lives here, not in the core, because
 the core never reads ground truth.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Sequence
+
+import numpy as np
 
 from objslam_mapper.baselines import map_of_groups
 from objslam_mapper.catalog import Catalog
@@ -23,8 +28,10 @@ from objslam_mapper.problem import GraphProblem, build_problem
 from objslam_mapper.records import ImageSlices, OdometrySample
 from objslam_mapper.tracklets import tracklets_of_problem
 from objslam_tools.ground_truth import GroundTruth
-from objslam_tools.oracle import OracleOptions, oracle_assignment
+from objslam_tools.oracle import OracleOptions, oracle_assignment, truth_residual_chi2
 from objslam_tools.trajectory import PoseTrack
+
+logger = logging.getLogger(__name__)
 
 
 def oracle_groups(
@@ -34,16 +41,48 @@ def oracle_groups(
     ground_truth_track: PoseTrack,
     measurements: Sequence[int] | None = None,
     options: OracleOptions | None = None,
-) -> dict[int, list[int]]:
-    """Real object id -> the problem's measurement indices it explains (of ``measurements``, default all)."""
+) -> tuple[dict[int, list[int]], int]:
+    """Real object id -> the problem's measurement indices it explains (of ``measurements``, default all).
+
+    Also returns how many slices the oracle gave an object but the measurement model rejects
+    (residual at the truth beyond ``options.residual_gate_chi2``); they are in no group.
+    """
+    options = options or OracleOptions()
     ids = oracle_assignment(images, ground_truth, ground_truth_track, options)
     keep = range(problem.measurement_count) if measurements is None else sorted(set(measurements))
-    groups: dict[int, list[int]] = {}
+    assigned: list[tuple[int, int]] = []
     for m in keep:
         object_id = ids[int(problem.measurement_image[m])][int(problem.measurement_slot[m])]
         if object_id is not None:
-            groups.setdefault(object_id, []).append(int(m))
-    return groups
+            assigned.append((int(m), object_id))
+    if not assigned:
+        return {}, 0
+    index = np.array([m for m, _ in assigned], dtype=np.int64)
+    objects = {o.id: o for o in ground_truth.objects}
+    truth = [objects[object_id] for _, object_id in assigned]
+    # Images outside /ground_truth/odom got no object above, so every pose here is covered.
+    poses = ground_truth_track.interpolate(problem.stamps_ns[problem.measurement_pose[index]])
+    chi2 = truth_residual_chi2(
+        problem.measurements[index],
+        problem.measurement_stddev[index],
+        poses,
+        [o.position_m for o in truth],
+        [o.size_m for o in truth],
+        ground_truth.mount,
+    )
+    consistent = chi2 <= options.residual_gate_chi2
+    groups: dict[int, list[int]] = {}
+    for (m, object_id), ok in zip(assigned, consistent, strict=True):
+        if ok:
+            groups.setdefault(object_id, []).append(m)
+    inconsistent = int(np.count_nonzero(~consistent))
+    if inconsistent:
+        logger.info(
+            "oracle: %d of %d slices of real objects are beyond the model's chi-square gate (merged blobs): clutter",
+            inconsistent,
+            len(assigned),
+        )
+    return groups, inconsistent
 
 
 def build_oracle_map(
@@ -60,7 +99,7 @@ def build_oracle_map(
     problem = build_problem(odometry, images, graph.camera_mount.to_mount(), catalog, graph)
     chained = tracklets_of_problem(problem, config.sampler.tracklets)
     in_tracklets = [m for t in chained.tracklets for m in t.measurement_indices]
-    groups = oracle_groups(problem, images, ground_truth, ground_truth_track, in_tracklets)
+    groups, inconsistent = oracle_groups(problem, images, ground_truth, ground_truth_track, in_tracklets)
     diagnostics = {
         "association": "oracle",
         "poses": problem.pose_count,
@@ -69,6 +108,7 @@ def build_oracle_map(
         "isolated_dropped": len(chained.dropped_measurements),
         "association_objects": len(groups),
         "clutter_measurements": len(in_tracklets) - sum(len(g) for g in groups.values()),
+        "inconsistent_measurements": inconsistent,
     }
     built = map_of_groups(problem, [groups[k] for k in sorted(groups)], config.sampler, diagnostics)
     built.diagnostics["timings_s"] = {"total": round(time.perf_counter() - started, 3)}
