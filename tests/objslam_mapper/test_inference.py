@@ -21,6 +21,7 @@ from objslam_mapper.inference import (
 )
 from objslam_mapper.sampler import ExactDistribution, MetropolisHastings
 from objslam_mapper.solver import solve
+from objslam_mapper.synthetic import SyntheticObject
 from objslam_mapper.tracklets import Tracklet, tracklets_of_problem
 
 from .association_scenes import GREEN, POSTER_FRAMES, RED_A, RED_B, problem_of, simulate, with_poster
@@ -185,6 +186,39 @@ def test_initial_association_joins_near_tracklets_of_one_class_seen_apart():
     ]
     state = initial_association(tracklets, 0.6)
     assert state == Association.of([0, 0, 1, 2, 3])
+
+
+def test_initial_association_leaves_the_given_tracklets_in_clutter():
+    def tracklet(frames, xy):
+        return Tracklet("red", tuple(range(*frames)), tuple(range(*frames)), xy)
+
+    tracklets = [tracklet((0, 5), (0.0, 0.0)), tracklet((10, 15), (0.3, 0.0)), tracklet((20, 25), (0.2, 0.1))]
+    assert initial_association(tracklets, 0.6, clutter={0}) == Association.of([CLUTTER, 0, 0])
+    assert initial_association(tracklets, 0.6, clutter={0, 1, 2}) == Association.of([CLUTTER] * 3)
+
+
+def test_a_floor_patch_prefers_clutter_and_starts_there_while_a_short_object_does_not():
+    """A flat blue patch on the floor (0.18 m across) fits a blue cylinder (0.2 x 0.9 m) only
+    with a height tens of prior stddevs off; a yellow object (0.5 x 0.3 m, as short as real
+    objects get) fits its class. The target, alone with the odometry, tells them apart by a
+    clear margin, and the start state of the chain follows it."""
+    yellow = SyntheticObject("yellow", (2.5, 1.3, 0.0), (0.52, 0.29))
+    patch = SyntheticObject("blue", (3.5, -1.2, 0.0), (0.18, 0.003))
+    run = simulate((yellow, patch))
+    problem = problem_of(run)
+    chained = tracklets_of_problem(problem)
+    target = AssociationTarget(problem, chained.tracklets, ClutterConfig())
+    assert set(chained.labels) == {"blue", "yellow"}
+    for t, tracklet in enumerate(chained.tracklets):
+        alone = solve(problem, [list(tracklet.measurement_indices)]).log_evidence
+        margin = target.tracklet_clutter_log_likelihood(t) - alone
+        if tracklet.label == "blue":
+            assert margin > 20.0 and target.prefers_clutter(t)
+        else:
+            assert margin < -3.0 and not target.prefers_clutter(t)
+    built = infer_map(problem, QUICK)
+    assert built.diagnostics["start_clutter_tracklets"] == chained.labels.count("blue")
+    assert [o.label for o in built.objects] == ["yellow"]
 
 
 def test_sampler_config_validates():
