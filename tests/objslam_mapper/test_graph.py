@@ -70,18 +70,26 @@ def draw_scene(rng):
 
 def state_vector(solution):
     objects = [np.r_[o.location_m, o.size_m] for o in solution.objects]
-    return np.concatenate([np.ravel(solution.map_T_base), *objects])
+    return np.concatenate([np.ravel(solution.map_T_base), *objects, solution.calibration])
 
 
 def whitened_residuals(problem, groups, theta):
-    """All whitened residuals of the graph at theta = (poses, objects), written out plainly."""
-    n = problem.pose_count
-    poses, objects = theta[: 3 * n].reshape(n, 3), theta[3 * n :].reshape(-1, 5)
+    """All whitened residuals of the graph at theta = (poses, objects, calibration), written out plainly."""
+    n, nc = problem.pose_count, problem.calibration_dim
+    poses, objects = theta[: 3 * n].reshape(n, 3), theta[3 * n : len(theta) - nc].reshape(-1, 5)
+    distance_scale, turn_scale, turn_bias = theta[len(theta) - nc :] if nc else (0.0, 0.0, 0.0)
     out = []
     for i in range(n - 1):
-        err = between(poses[i], poses[i + 1]) - problem.increments[i]
+        true = between(poses[i], poses[i + 1])
+        measured = np.r_[
+            (1 + distance_scale) * true[:2],
+            (1 + turn_scale) * true[2] + turn_bias * problem.increment_path_length_m[i],
+        ]
+        err = measured - problem.increments[i]
         err[2] = wrap_angle(err[2])
         out.append(err / problem.increment_stddev[i])
+    if nc:
+        out.append(theta[len(theta) - nc :] / problem.calibration_prior_stddev)
     err = poses[0] - problem.odometry_poses[0]
     err[2] = wrap_angle(err[2])
     out.append(err / problem.first_pose_stddev)
@@ -96,7 +104,7 @@ def whitened_residuals(problem, groups, theta):
 
 def log_normalizers(problem, groups):
     """Sum of -1/2 log|2 pi Sigma| over every factor, from the noise standard deviations."""
-    sigmas = [problem.increment_stddev.ravel(), problem.first_pose_stddev]
+    sigmas = [problem.increment_stddev.ravel(), problem.first_pose_stddev, problem.calibration_prior_stddev]
     for group in groups:
         group = np.asarray(group)
         sigmas.append(problem.measurement_stddev[group].ravel())
@@ -332,16 +340,22 @@ def test_laplace_evidence_matches_an_independent_dense_computation(dense_object_
 
 def batch_log_joint(problem, groups, thetas):
     """log p(Z, theta) of many states (S, d) at once: the plain formulas of whitened_residuals."""
-    n = problem.pose_count
-    poses, objects = thetas[:, : 3 * n].reshape(-1, n, 3), thetas[:, 3 * n :].reshape(len(thetas), -1, 5)
+    n, nc, dim = problem.pose_count, problem.calibration_dim, thetas.shape[1]
+    poses, objects = thetas[:, : 3 * n].reshape(-1, n, 3), thetas[:, 3 * n : dim - nc].reshape(len(thetas), -1, 5)
+    calib = thetas[:, dim - nc :] if nc else np.zeros((len(thetas), 3))
     c, s = np.cos(poses[:, :-1, 2]), np.sin(poses[:, :-1, 2])
     d = poses[:, 1:, :2] - poses[:, :-1, :2]
     odo = np.stack(
-        [c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], poses[:, 1:, 2] - poses[:, :-1, 2]], -1
+        [c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1], wrap_angle(poses[:, 1:, 2] - poses[:, :-1, 2])],
+        -1,
     )
+    odo[..., :2] *= 1 + calib[:, None, :1]
+    odo[..., 2] = (1 + calib[:, 1:2]) * odo[..., 2] + calib[:, 2:] * problem.increment_path_length_m
     odo = odo - problem.increments
     odo[..., 2] = wrap_angle(odo[..., 2])
     total = np.sum((odo / problem.increment_stddev) ** 2, axis=(1, 2))
+    if nc:
+        total += np.sum((calib / problem.calibration_prior_stddev) ** 2, axis=1)
     first = poses[:, 0] - problem.odometry_poses[0]
     first[:, 2] = wrap_angle(first[:, 2])
     total += np.sum((first / problem.first_pose_stddev) ** 2, axis=1)
@@ -358,9 +372,25 @@ def batch_log_joint(problem, groups, thetas):
     return log_normalizers(problem, groups) - 0.5 * total
 
 
-def test_laplace_evidence_matches_importance_sampling():
-    """The marginal likelihood itself, integrated numerically over poses and the object."""
-    run, problem = make_run(6, scene=SCENE[1:2], n_poses=6)
+@pytest.mark.parametrize("calibrated, n_samples", [(False, 40000), (True, 160000)], ids=["plain", "calibrated"])
+def test_laplace_evidence_matches_importance_sampling(calibrated, n_samples):
+    """The marginal likelihood itself, integrated numerically over poses, the object (and the calibration).
+
+    The calibration enters the odometry bilinearly and, over 6 poses, is hardly more than
+    its prior: the posterior is less Gaussian, so more samples are drawn.
+    """
+    config = (
+        CONFIG
+        if calibrated
+        else dataclasses.replace(
+            CONFIG,
+            odometry=dataclasses.replace(
+                CONFIG.odometry, calibration=dataclasses.replace(CONFIG.odometry.calibration, enabled=False)
+            ),
+        )
+    )
+    run, problem = make_run(6, scene=SCENE[1:2], n_poses=6, config=config)
+    assert problem.calibration_dim == (3 if calibrated else 0)
     groups = run.groups(problem)
     solution = solve(problem, groups)
     theta = state_vector(solution)
@@ -368,7 +398,7 @@ def test_laplace_evidence_matches_importance_sampling():
     single = batch_log_joint(problem, groups, theta[None, :])[0]
     assert single == pytest.approx(log_normalizers(problem, groups) - 0.5 * solution.chi2, abs=1e-9)
     rng = np.random.default_rng(0)
-    samples = rng.multivariate_normal(theta, cov, size=40000)
+    samples = rng.multivariate_normal(theta, cov, size=n_samples)
     centred = samples - theta
     log_q = -0.5 * np.einsum("si,ij,sj->s", centred, np.linalg.inv(cov), centred)
     log_q -= 0.5 * np.linalg.slogdet(2 * np.pi * cov)[1]
@@ -377,7 +407,8 @@ def test_laplace_evidence_matches_importance_sampling():
     weights = np.exp(log_weights - log_weights.max())
     standard_error = np.std(weights) / np.mean(weights) / np.sqrt(len(samples))
     assert standard_error < 0.01
-    assert solution.log_evidence == pytest.approx(estimate, abs=0.03)
+    # Calibrated, the Laplace approximation itself is off by about 0.02 nats here (200k samples).
+    assert solution.log_evidence == pytest.approx(estimate, abs=0.05 if calibrated else 0.03)
 
 
 def test_evidence_prefers_the_true_number_of_objects():

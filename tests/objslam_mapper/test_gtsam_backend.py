@@ -65,13 +65,15 @@ def reference():
 
 
 def state(solution):
-    return solution.map_T_base, np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
+    objects = np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
+    return solution.map_T_base, objects, solution.calibration
 
 
 def assert_same_solution(theirs, ours, atol_state=1e-6):
     assert theirs.converged
     np.testing.assert_allclose(theirs.map_T_base, ours.map_T_base, atol=atol_state)
     np.testing.assert_allclose(state(theirs)[1], state(ours)[1], atol=atol_state)
+    np.testing.assert_allclose(theirs.calibration, ours.calibration, atol=atol_state)
     np.testing.assert_array_equal(theirs.object_of_measurement, ours.object_of_measurement)
     assert theirs.chi2 == pytest.approx(ours.chi2, abs=1e-4)
     assert theirs.log_det_information == pytest.approx(ours.log_det_information, abs=1e-4)
@@ -90,6 +92,7 @@ def test_same_map_evidence_and_marginals_as_the_fast_solver(reference, drive, pe
         problem, groups, with_covariances=True, per_detection=per_detection, drive=drive, window_poses=window_poses
     )
     assert_same_solution(theirs, ours)
+    np.testing.assert_allclose(theirs.calibration_cov, ours.calibration_cov, rtol=1e-4)
     for a, b in zip(theirs.objects, ours.objects, strict=True):
         assert a.label == b.label
         np.testing.assert_array_equal(a.measurement_indices, b.measurement_indices)
@@ -156,7 +159,7 @@ def numerical_jacobian(factor, values, step=1e-6):
     """Central differences of the whitened error over each key's tangent space (Pose2 chart, vectors)."""
     blocks = []
     for key in factor.keys():
-        dim = 3 if gtsam.Symbol(key).chr() == ord("x") else 5
+        dim = 5 if gtsam.Symbol(key).chr() == ord("o") else 3  # x: Pose2, c: calibration
         block = np.empty((factor.dim(), dim))
         for k in range(dim):
             delta = gtsam.VectorValues()
@@ -176,11 +179,12 @@ def test_factor_jacobians_match_finite_differences(reference, per_detection, win
     rng = np.random.default_rng(1)
     graph, keys = build_gtsam_graph(problem, groups, per_detection=per_detection, window_poses=window_poses)
     # A random state near the MAP (the model is defined there), headings across +-pi included.
-    poses, objects = state(ours)
+    poses, objects, calibration = state(ours)
+    assert len(calibration) == 3  # the default model estimates the odometry calibration
     poses = poses + rng.normal(0.0, [0.05, 0.05, 0.1], poses.shape)
     poses[0, 2] = np.pi - 1e-3
     objects = objects + rng.normal(0.0, 0.02, objects.shape)
-    values = keys.to_values(poses, objects)
+    values = keys.to_values(poses, objects, calibration + rng.normal(0.0, 0.05, 3))
     checked = 0
     for index in range(graph.size()):
         factor = graph.at(index)
@@ -199,21 +203,22 @@ def test_factor_jacobians_match_finite_differences(reference, per_detection, win
 def test_one_factor_per_group_and_window():
     problem, groups = make_problem(8)
     per_group, keys = build_gtsam_graph(problem, groups, window_poses=None)
-    # First-pose prior, one odometry factor, a prior and a slice factor per group.
-    assert per_group.size() == 2 + 2 * len(groups)
+    # First-pose prior, one odometry factor, a prior and a slice factor per group, the calibration prior.
+    assert per_group.size() == 2 + 2 * len(groups) + 1
+    assert keys.calibration() in per_group.at(1).keys()
     assert len(per_group.at(2 + 1).keys()) == len(np.unique(problem.measurement_pose[groups[0]])) + 1
     assert keys.object(0) in per_group.at(2 + 1).keys()
     windowed, _ = build_gtsam_graph(problem, groups, window_poses=5)
     windows = [len(np.unique(problem.measurement_pose[g] // 5)) for g in groups]
-    assert windowed.size() == 1 + int(np.ceil((N_POSES - 1) / 5)) + len(groups) + sum(windows)
+    assert windowed.size() == 1 + int(np.ceil((N_POSES - 1) / 5)) + len(groups) + sum(windows) + 1
     per_detection, _ = build_gtsam_graph(problem, groups, per_detection=True)
-    assert per_detection.size() == 1 + (N_POSES - 1) + len(groups) + sum(len(g) for g in groups)
+    assert per_detection.size() == 1 + (N_POSES - 1) + len(groups) + sum(len(g) for g in groups) + 1
 
 
 def test_a_camera_inside_an_object_is_a_huge_error(reference):
     problem, groups, ours = reference
     graph, keys = build_gtsam_graph(problem, groups)
-    poses, objects = state(ours)
+    poses, objects, _ = state(ours)
     seen_from = poses[problem.measurement_pose[groups[0][0]]]
     objects[0, :2] = seen_from[:2]
     assert graph.error(keys.to_values(poses, objects)) > 1e10

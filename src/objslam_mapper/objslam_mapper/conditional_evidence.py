@@ -11,7 +11,9 @@ the same terms as :mod:`objslam_mapper.solver`'s evidence, restricted to one obj
 conditioned on the poses. The evidence of a whole association conditioned on ``P`` is the
 sum over its objects plus a term that does not depend on the association, so the
 difference between two associations that differ by one move only needs the objects the
-move touches: a few 5-variable solves instead of a graph of every pose.
+move touches: a few 5-variable solves instead of a graph of every pose. The odometry
+calibration (when the graph estimates it) enters only the odometry factors and its prior,
+which no association changes: it is held fixed with the poses and drops out with them.
 
 The sampler uses it as the first stage of a delayed-acceptance Metropolis-Hastings step
 (:mod:`objslam_mapper.sampler`): it is an approximation of the target, never the target.

@@ -32,13 +32,48 @@ class CameraMountConfig:
 
 
 @dataclass(frozen=True)
+class OdometryCalibrationConfig:
+    """Systematic odometry error estimated in the graph: one calibration per map.
+
+    Wheel odometry misreads distance by a scale (mean wheel diameter), turns by a scale
+    (effective wheelbase) and adds a turn per metre travelled (left/right wheel diameter
+    mismatch), cf. Borenstein's UMBmark. The odometry factor predicts the measured
+    increment from the true one with these three (:mod:`objslam_mapper.normal_equations`).
+    The zero-mean Gaussian prior only has to keep them in a plausible range, not to know
+    the robot: stock differential-drive robots are off by about 1-3 % in distance and
+    turn before calibration (tyre pressure, wear, the contact point of wide wheels), so
+    5 % is a generous 1-sigma; a 0.02 rad/m bias is a left/right diameter mismatch of
+    about 1 % on a 0.4 m wheelbase, several times what UMBmark finds on real robots.
+    """
+
+    enabled: bool = setting(
+        True,
+        "estimate the odometry's distance scale, turn scale and turn bias per metre with the map "
+        "(false: odometry increments are taken as unbiased, the random walk alone)",
+    )
+    distance_scale_stddev: float = setting(
+        0.05, "prior stddev of the distance scale error (measured distance = (1 + scale) true)", minimum=1e-9
+    )
+    turn_scale_stddev: float = setting(
+        0.05, "prior stddev of the turn scale error (measured turn = (1 + scale) true turn + ...)", minimum=1e-9
+    )
+    turn_bias_stddev_rad_per_m: float = setting(
+        0.02, "prior stddev of the spurious turn per metre travelled (rad/m)", minimum=1e-9
+    )
+
+    def prior_stddev(self) -> tuple[float, float, float]:
+        return (self.distance_scale_stddev, self.turn_scale_stddev, self.turn_bias_stddev_rad_per_m)
+
+
+@dataclass(frozen=True)
 class OdometryNoiseConfig:
     """Noise of the odometry factor between consecutive image poses.
 
-    The odometry error is a random walk: the variance of an increment grows linearly with
+    The random part of the odometry error is a random walk: the variance of an increment grows linearly with
     the path length and with the absolute angle turned over it, so it does not depend on
     how often images were taken. Values are standard deviations after 1 m of travel or
-    1 rad of turn; the minimum keeps standing still well-conditioned.
+    1 rad of turn; the minimum keeps standing still well-conditioned. The systematic part
+    (scales and bias) is the ``calibration`` variable of the graph.
     """
 
     xy_stddev_per_sqrt_m: float = setting(
@@ -53,6 +88,9 @@ class OdometryNoiseConfig:
         0.001, "prior stddev of the first pose's position (fixes the map frame to odom)", minimum=1e-9
     )
     first_pose_stddev_rad: float = setting(0.001, "prior stddev of the first pose's heading (rad)", minimum=1e-9)
+    calibration: OdometryCalibrationConfig = setting(
+        OdometryCalibrationConfig(), "systematic odometry error (scale and bias) estimated with the map"
+    )
 
 
 @dataclass(frozen=True)

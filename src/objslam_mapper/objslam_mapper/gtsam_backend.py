@@ -7,13 +7,18 @@ marginals, so either backend can serve the association sampler
 
 Graph (:func:`build_gtsam_graph`)
     ``Pose2`` variables ``x<i>`` (one per image pose) and ``Vector5`` object variables
-    ``o<j>`` = (x, y, z_base, diameter, height), one per group. Factors:
+    ``o<j>`` = (x, y, z_base, diameter, height), one per group, and when the problem
+    estimates it the ``Vector3`` odometry calibration ``c0`` = (distance scale, turn scale,
+    turn bias per metre). Factors:
 
     - the first-pose prior and the odometry factors, with the residuals of the fast
       solver (``(R_i^T (t_j - t_i) - u_xy, wrap(theta_j - theta_i - u_theta))``, whitened
-      per component). GTSAM's ``BetweenFactorPose2``/``PriorFactorPose2`` would differ: this
-      wheel's Pose2 chart is the exponential map, so their error is ``Logmap(u^-1 x_i^-1 x_j)``,
-      another model. They are therefore custom factors too;
+      per component; with the calibration ``((1 + s_d) R_i^T (t_j - t_i) - u_xy,
+      wrap((1 + s_t) wrap(theta_j - theta_i) + b L - u_theta))``, each odometry factor then
+      also keyed on ``c0``, which has a zero-mean ``PriorFactorVector``). GTSAM's
+      ``BetweenFactorPose2``/``PriorFactorPose2`` would differ: this wheel's Pose2 chart
+      is the exponential map, so their error is ``Logmap(u^-1 x_i^-1 x_j)``, another model.
+      They are therefore custom factors too;
     - the class priors as ``PriorFactorVector`` with diagonal sigmas (built-in, C++);
     - the slice factors (:mod:`slice_model`), with its analytic Jacobians composed with the
       Pose2 chart: a GTSAM tangent vector ``v`` of a pose moves it by
@@ -59,7 +64,7 @@ from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.normal_equations import Layout, layout_of
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
-from objslam_mapper.solver import GraphSolution, initial_state, make_solution
+from objslam_mapper.solver import GraphSolution, initial_calibration, initial_state, make_solution
 
 logger = logging.getLogger(__name__)
 
@@ -84,10 +89,15 @@ class GtsamBackendError(ValueError):
 
 @dataclass(frozen=True)
 class GtsamKeys:
-    """Keys of a graph's variables: Pose2 ``x<i>`` per pose, Vector5 ``o<j>`` per group."""
+    """Keys of a graph's variables: Pose2 ``x<i>`` per pose, Vector5 ``o<j>`` per group, Vector3 ``c0``."""
 
     pose_count: int
     object_count: int
+    calibration_dim: int = 0  # 3: the odometry calibration c0 is a variable
+
+    @staticmethod
+    def calibration() -> int:
+        return gtsam.symbol("c", 0)
 
     @staticmethod
     def pose(i: int) -> int:
@@ -105,9 +115,14 @@ class GtsamKeys:
     def object_keys(self) -> list[int]:
         return [self.object(j) for j in range(self.object_count)]
 
-    def to_values(self, map_T_base: ArrayLike, objects: ArrayLike) -> gtsam.Values:
-        """Values of (N, 3) poses (x, y, theta) and (K, 5) objects."""
+    def to_values(
+        self, map_T_base: ArrayLike, objects: ArrayLike, calibration: ArrayLike | None = None
+    ) -> gtsam.Values:
+        """Values of (N, 3) poses (x, y, theta), (K, 5) objects and the calibration (zero if None)."""
         values = gtsam.Values()
+        if self.calibration_dim:
+            calib = np.zeros(self.calibration_dim) if calibration is None else np.asarray(calibration, dtype=float)
+            values.insert(self.calibration(), np.array(calib))
         for i, (x, y, theta) in enumerate(np.asarray(map_T_base, dtype=float)):
             values.insert(self.pose(i), gtsam.Pose2(x, y, theta))
         for j, obj in enumerate(np.asarray(objects, dtype=float).reshape(-1, OBJECT_DIM)):
@@ -120,6 +135,10 @@ class GtsamKeys:
         poses[:, 2] = wrap_angle(poses[:, 2])
         objects = np.array([values.atVector(k) for k in self.object_keys]).reshape(-1, OBJECT_DIM)
         return poses, objects
+
+    def calibration_of(self, values: gtsam.Values) -> NDArray[np.float64]:
+        """The calibration of ``values``: (3,), or (0,) when it is not a variable."""
+        return np.array(values.atVector(self.calibration())) if self.calibration_dim else np.zeros(0)
 
 
 def _pose_array(pose: gtsam.Pose2) -> NDArray[np.float64]:
@@ -187,9 +206,13 @@ def _slice_factor(problem: GraphProblem, measurements: NDArray[np.int64], object
 
 
 def _odometry_factor(problem: GraphProblem, first: int, stop: int) -> gtsam.CustomFactor:
-    """One CustomFactor over the odometry increments first..stop-1 (poses first..stop), rows 3k..3k+2 each."""
+    """One CustomFactor over the odometry increments first..stop-1 (poses first..stop), rows 3k..3k+2 each.
+
+    Keyed on the calibration too (last key) when the problem estimates it."""
     pose_keys = [GtsamKeys.pose(i) for i in range(first, stop + 1)]
+    calibrated = problem.calibration_dim > 0
     u = problem.increments[first:stop]
+    length = problem.increment_path_length_m[first:stop]
     w = 1.0 / problem.increment_stddev[first:stop]  # (n, 3)
     n = stop - first
 
@@ -198,20 +221,34 @@ def _odometry_factor(problem: GraphProblem, first: int, stop: int) -> gtsam.Cust
         pi, pj = poses[:-1], poses[1:]
         c, s = np.cos(pi[:, 2]), np.sin(pi[:, 2])
         dx, dy = pj[:, 0] - pi[:, 0], pj[:, 1] - pi[:, 1]
-        err = np.stack([c * dx + s * dy - u[:, 0], -s * dx + c * dy - u[:, 1], pj[:, 2] - pi[:, 2] - u[:, 2]], -1)
+        q1, q2 = c * dx + s * dy, -s * dx + c * dy
+        if calibrated:
+            calib = values.atVector(GtsamKeys.calibration())
+            k, m = 1.0 + calib[0], 1.0 + calib[1]
+            dtheta = wrap_angle(pj[:, 2] - pi[:, 2])
+            err = np.stack([k * q1 - u[:, 0], k * q2 - u[:, 1], m * dtheta + calib[2] * length - u[:, 2]], -1)
+        else:
+            k = m = 1.0
+            err = np.stack([q1 - u[:, 0], q2 - u[:, 1], pj[:, 2] - pi[:, 2] - u[:, 2]], -1)
         err[:, 2] = wrap_angle(err[:, 2])
         if jacobians is not None:
             # d err / d (map x, y, theta) of pose i and pose j, per increment (n, 3, 3).
-            zero, one = np.zeros(n), np.ones(n)
-            jac_i = np.array([[-c, -s, -s * dx + c * dy], [s, -c, -c * dx - s * dy], [zero, zero, -one]])  # (3, 3, n)
-            jac_j = np.array([[c, s, zero], [-s, c, zero], [zero, zero, one]])
+            zero, mm = np.zeros(n), np.full(n, m)
+            jac_i = np.array([[-k * c, -k * s, k * q2], [k * s, -k * c, -k * q1], [zero, zero, -mm]])  # (3, 3, n)
+            jac_j = np.array([[k * c, k * s, zero], [-k * s, k * c, zero], [zero, zero, mm]])
             jac_i = _chart(jac_i * w.T[:, None, :], pi[:, 2]).transpose(2, 0, 1)
             jac_j = _chart(jac_j * w.T[:, None, :], pj[:, 2]).transpose(2, 0, 1)
             increment = np.arange(n)
             _set_pose_jacobians(jacobians, n + 1, (jac_i, increment), (jac_j, increment + 1))
+            if calibrated:
+                jac_c = np.zeros((n, 3, 3))
+                jac_c[:, 0, 0], jac_c[:, 1, 0] = w[:, 0] * q1, w[:, 1] * q2
+                jac_c[:, 2, 1], jac_c[:, 2, 2] = w[:, 2] * dtheta, w[:, 2] * length
+                jacobians[n + 1] = jac_c.reshape(3 * n, 3)
         return (err * w).ravel()
 
-    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * n), pose_keys, error)
+    keys = [*pose_keys, GtsamKeys.calibration()] if calibrated else pose_keys
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * n), keys, error)
 
 
 def _first_pose_factor(problem: GraphProblem) -> gtsam.CustomFactor:
@@ -258,7 +295,7 @@ def build_gtsam_graph(
 def _build(
     problem: GraphProblem, layout: Layout, per_detection: bool, window_poses: int | None
 ) -> tuple[gtsam.NonlinearFactorGraph, GtsamKeys]:
-    keys = GtsamKeys(problem.pose_count, layout.n_objects)
+    keys = GtsamKeys(problem.pose_count, layout.n_objects, problem.calibration_dim)
     window = _window_size(problem.pose_count, window_poses, per_detection)
     graph = gtsam.NonlinearFactorGraph()
     graph.add(_first_pose_factor(problem))
@@ -276,6 +313,9 @@ def _build(
             chunks = np.split(group[order], np.flatnonzero(np.diff(cell[order])) + 1)
         for chunk in chunks:
             graph.add(_slice_factor(problem, chunk, keys.object(j)))
+    if problem.calibration_dim:
+        sigmas = gtsam.noiseModel.Diagonal.Sigmas(np.array(problem.calibration_prior_stddev))
+        graph.add(gtsam.PriorFactorVector(keys.calibration(), np.zeros(problem.calibration_dim), sigmas))
     return graph, keys
 
 
@@ -296,6 +336,8 @@ class _Linearizer:
     def __init__(self, graph: gtsam.NonlinearFactorGraph, keys: GtsamKeys):
         self.graph = graph
         self.dims = {k: POSE_DIM for k in keys.pose_keys} | {k: OBJECT_DIM for k in keys.object_keys}
+        if keys.calibration_dim:
+            self.dims[keys.calibration()] = keys.calibration_dim
         self.zero = gtsam.VectorValues()
         for k, dim in self.dims.items():
             self.zero.insert(k, np.zeros(dim))
@@ -430,6 +472,7 @@ def solve_gtsam(
         raise GtsamBackendError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
     layout = layout_of(problem, groups)
     poses, objects = initial_state(problem, layout, warm_start)
+    calib = initial_calibration(problem, warm_start)
     valid = predict_reduced(
         poses[layout.pose_of],
         objects[layout.object_of, :3],
@@ -439,13 +482,13 @@ def solve_gtsam(
     ).valid
     if not np.all(valid):
         logger.debug("GTSAM solve cannot start: a pose lies inside an object's starting cylinder")
-        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None)
+        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
 
     graph, keys = _build(problem, layout, per_detection, window_poses)
     cfg = problem.solver
     limit = cfg.max_iterations if max_iterations is None else max_iterations
     linearize = _Linearizer(graph, keys)
-    initial = keys.to_values(poses, objects)
+    initial = keys.to_values(poses, objects, calib)
     if drive == "python":
         driven = _drive_python(linearize, initial, cfg, limit)
     else:
@@ -460,19 +503,20 @@ def solve_gtsam(
     if not converged:
         logger.debug("GTSAM solve stopped after %d linearizations without converging", driven.iterations)
     log_det = 2.0 * float(bayes_tree.logDeterminant())
-    dimension = POSE_DIM * problem.pose_count + OBJECT_DIM * layout.n_objects
+    dimension = POSE_DIM * problem.pose_count + OBJECT_DIM * layout.n_objects + problem.calibration_dim
     log_normalizer = (
         problem.trajectory_log_normalizer
         + float(np.sum(problem.measurement_log_normalizer[layout.measurements]))
         + float(np.sum(problem.prior_log_normalizer[layout.labels]))
     )
     log_evidence = -final.cost + log_normalizer + 0.5 * dimension * LOG_2PI - 0.5 * log_det
-    covariance = None
+    covariance = calib_cov = None
     if with_covariances:
         marginals = gtsam.Marginals(final.graph, driven.values)
         covariance = np.array([marginals.marginalCovariance(k) for k in keys.object_keys]).reshape(
             -1, OBJECT_DIM, OBJECT_DIM
         )
+        calib_cov = marginals.marginalCovariance(keys.calibration()) if keys.calibration_dim else np.zeros((0, 0))
     poses, objects = keys.from_values(driven.values)
     return make_solution(
         problem,
@@ -485,6 +529,8 @@ def solve_gtsam(
         2.0 * final.cost,
         log_det,
         covariance,
+        keys.calibration_of(driven.values),
+        calib_cov,
     )
 
 

@@ -307,7 +307,12 @@ class AssociationTarget:
                     size_cov=nan2 if est.size_cov is None else np.asarray(est.size_cov, dtype=float),
                 )
             )
-        return SampleSummary(map_T_base=np.asarray(result.map_T_base, dtype=float), objects=tuple(objects))
+        return SampleSummary(
+            map_T_base=np.asarray(result.map_T_base, dtype=float),
+            objects=tuple(objects),
+            calibration=np.asarray(result.calibration, dtype=float),
+            calibration_cov=np.asarray(result.calibration_cov, dtype=float),
+        )
 
 
 def initial_association(

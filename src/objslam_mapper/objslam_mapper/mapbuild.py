@@ -19,7 +19,10 @@ whatever its object number. Then
 - an identity's location and size are averages over the samples yielding it (eqs. 19-20),
   its covariance the mixture's (mean marginal covariance plus the spread of the means);
   identities that no sample yields are averaged over the samples holding them;
-- the trajectory is the average over all samples (eq. 18), headings averaged on the circle.
+- the trajectory is the average over all samples (eq. 18), headings averaged on the circle;
+- the odometry calibration (when the graph estimates it) is averaged like an object (mean
+  over all samples, mixture covariance) and reported in the diagnostics under
+  ``odometry_calibration``.
 
 Samples are given with multiplicities: the chain repeats states, and a repeated state
 needs its solve once.
@@ -60,6 +63,10 @@ class SampleSummary:
 
     map_T_base: NDArray[np.float64]  # (N, 3)
     objects: tuple[SampleObject, ...]
+    # Odometry calibration (distance scale, turn scale, turn bias rad/m) and its marginal covariance;
+    # empty when the graph does not estimate it.
+    calibration: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    calibration_cov: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def location_stddev_m(location_cov: NDArray[np.float64]) -> float:
@@ -111,6 +118,32 @@ def _mean_trajectory(weighted: Sequence[tuple[NDArray[np.float64], float]]) -> N
     return np.column_stack([xy, np.arctan2(sin, cos)])
 
 
+CALIBRATION_NAMES = ("distance_scale", "turn_scale", "turn_bias_rad_per_m")
+
+
+def _mean_calibration(weighted: Sequence[tuple[SampleSummary, float]]) -> dict[str, Any] | None:
+    """Mixture mean and covariance of the samples' odometry calibrations, as plain numbers."""
+    rows = [
+        (np.asarray(s.calibration, dtype=float), np.asarray(s.calibration_cov, dtype=float), w) for s, w in weighted
+    ]
+    if not rows or any(len(c) != len(CALIBRATION_NAMES) for c, _, _ in rows):
+        return None
+    total = sum(w for _, _, w in rows)
+    mean = sum(w * c for c, _, w in rows) / total
+    second = sum(w * (cov + np.outer(c, c)) for c, cov, w in rows) / total
+    cov = second - np.outer(mean, mean)
+    cov = 0.5 * (cov + cov.T)
+    out: dict[str, Any] = {name: float(v) for name, v in zip(CALIBRATION_NAMES, mean, strict=True)}
+    out.update(
+        {
+            f"{name}_stddev": float(math.sqrt(max(v, 0.0)))
+            for name, v in zip(CALIBRATION_NAMES, np.diag(cov), strict=True)
+        }
+    )
+    out["covariance"] = [[float(v) for v in row] for row in cov]
+    return out
+
+
 def build_from_samples(
     samples: Iterable[tuple[SampleSummary, int]],
     stamps_ns: Sequence[int],
@@ -128,12 +161,14 @@ def build_from_samples(
     """
     identities: dict[frozenset[int], _Identity] = {}
     trajectories: list[tuple[NDArray[np.float64], float]] = []
+    calibrations: list[tuple[SampleSummary, float]] = []
     total = 0
     for summary, count in samples:
         if count <= 0:
             continue
         total += count
         trajectories.append((np.asarray(summary.map_T_base, dtype=float), float(count)))
+        calibrations.append((summary, float(count)))
         for obj in summary.objects:
             entry = identities.setdefault(obj.identity, _Identity(obj.label))
             entry.add(obj, float(count), not is_spurious(obj, spurious_location_stddev_m))
@@ -178,4 +213,7 @@ def build_from_samples(
             "existence_threshold": float(existence_threshold),
         }
     )
+    calibration = _mean_calibration(calibrations)
+    if calibration is not None:
+        info["odometry_calibration"] = calibration
     return BuiltMap(objects=tuple(objects), rejected=tuple(rejected), trajectory=poses, diagnostics=info)

@@ -4,7 +4,23 @@ The variables are the poses (N x 3, additive x, y, theta) and the objects (K x 5
 x, y, z_base, diameter, height). The factors are the odometry factors between
 consecutive poses, the first-pose prior, one slice factor per assigned measurement
 (:mod:`objslam_mapper.slice_model`) and one class prior per object; all residuals are
-whitened. :class:`AssociationSystem` evaluates the cost and the Gauss-Newton system
+whitened.
+
+When the problem estimates the odometry calibration (``problem.calibration_dim == 3``),
+one more variable ``c = (s_d, s_t, b)`` (distance scale, turn scale, turn bias per metre
+of measured path ``L``) enters every odometry factor, which then predicts the measured
+increment ``u`` from the true one between the poses, in the frame of pose i:
+
+    u_xy    = (1 + s_d) R_i^T (t_j - t_i)
+    u_theta = (1 + s_t) wrap(theta_j - theta_i) + b L
+
+(a wheel-diameter error scales every distance, a wheelbase error every turn, a
+left/right diameter mismatch adds a turn per metre; ``L`` is the odometry's own path
+length of the increment, so ``b`` multiplies a constant: the true length differs from it
+by ``s_d L``, a second-order term). ``c`` has a zero-mean Gaussian prior. It couples with
+every pose, so it joins the objects in the dense block: the Schur complement is over
+``(objects, c)`` and the sparse system gets 3 dense rows and columns.
+:class:`AssociationSystem` evaluates the cost and the Gauss-Newton system
 ``Lambda step = -g`` (``Lambda = J^T J``) with numpy over all measurements at once, with
 the measurement axis last so every operation runs over contiguous arrays.
 
@@ -36,7 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.problem import OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
+from objslam_mapper.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
 
 _BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
@@ -47,6 +63,7 @@ class Layout:
     """Index arrays of one association, fixed for the whole solve (measurement axis last)."""
 
     n_poses: int
+    n_calib: int  # 3 with the odometry calibration as a variable, else 0
     groups: tuple[NDArray[np.int64], ...]
     measurements: NDArray[np.int64]  # (A,) assigned measurements, grouped by object
     object_of: NDArray[np.int64]
@@ -79,6 +96,9 @@ class Linearization:
     pose_off: NDArray[np.float64] | None = None  # (N-1, 3, 3): block (i, i+1)
     cross: NDArray[np.float64] | None = None  # (3, 5, A) pose-object block of each slice
     object_diag: NDArray[np.float64] | None = None  # (K, 5, 5)
+    grad_calib: NDArray[np.float64] | None = None  # (C,) C = 3 with the calibration, else 0
+    pose_calib: NDArray[np.float64] | None = None  # (N, 3, C) pose-calibration blocks
+    calib_diag: NDArray[np.float64] | None = None  # (C, C)
     _pose_object: NDArray[np.float64] | None = field(default=None, repr=False)
 
     def pose_object(self, layout: Layout) -> NDArray[np.float64]:
@@ -93,10 +113,10 @@ class Linearization:
             self._pose_object = block
         return self._pose_object
 
-    def diagonal(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Diagonals of the pose (3N,) and object (5K,) blocks."""
+    def diagonal(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Diagonals of the pose (3N,), object (5K,) and calibration (C,) blocks."""
         i3, i5 = np.arange(POSE_DIM), np.arange(OBJECT_DIM)
-        return self.pose_diag[:, i3, i3].ravel(), self.object_diag[:, i5, i5].ravel()
+        return self.pose_diag[:, i3, i3].ravel(), self.object_diag[:, i5, i5].ravel(), np.diag(self.calib_diag)
 
 
 @dataclass
@@ -107,7 +127,8 @@ class Factorization:
     step_pose: NDArray[np.float64]
     step_object: NDArray[np.float64]
     predicted_decrease: float
-    chol_schur: NDArray[np.float64] | None = None  # dense path: upper Cholesky factor of S
+    step_calib: NDArray[np.float64]  # (C,)
+    chol_schur: NDArray[np.float64] | None = None  # dense path: upper Cholesky factor of S (objects, then c)
     sparse_lu: scipy.sparse.linalg.SuperLU | None = None  # sparse path
 
 
@@ -135,6 +156,7 @@ def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike]) -> Layout:
     p3, o5 = np.arange(POSE_DIM)[:, None], np.arange(OBJECT_DIM)[:, None]
     return Layout(
         n_poses=problem.pose_count,
+        n_calib=problem.calibration_dim,
         groups=arrays,
         measurements=measurements,
         object_of=object_of,
@@ -165,8 +187,8 @@ class _SparsePattern:
 
     @classmethod
     def of(cls, layout: Layout) -> _SparsePattern:
-        n, k = layout.n_poses, layout.n_objects
-        dim = POSE_DIM * n + OBJECT_DIM * k
+        n, k, nc = layout.n_poses, layout.n_objects, layout.n_calib
+        dim = POSE_DIM * n + OBJECT_DIM * k + nc
         a3 = np.arange(POSE_DIM)
         p = np.arange(n)[:, None, None]
         diag_r, diag_c = 3 * p + a3[None, :, None], 3 * p + a3[None, None, :]
@@ -182,8 +204,13 @@ class _SparsePattern:
         obj_r, obj_c = np.broadcast_arrays(obj_r, obj_c)
         diag_r, diag_c = np.broadcast_arrays(diag_r, diag_c)
         off_r, off_c = np.broadcast_arrays(off_r, off_c)
-        rows = np.concatenate([x.ravel() for x in (diag_r, off_r, off_c, cross_r, cross_c, obj_r)])
-        cols = np.concatenate([x.ravel() for x in (diag_c, off_c, off_r, cross_c, cross_r, obj_c)])
+        ac = POSE_DIM * n + OBJECT_DIM * k + np.arange(nc)
+        pc_r, pc_c = np.broadcast_arrays(3 * p + a3[None, :, None], ac[None, None, :])
+        cc_r, cc_c = np.broadcast_arrays(ac[:, None], ac[None, :])
+        blocks_r = (diag_r, off_r, off_c, cross_r, cross_c, obj_r, pc_r, pc_c, cc_r)
+        blocks_c = (diag_c, off_c, off_r, cross_c, cross_r, obj_c, pc_c, pc_r, cc_c)
+        rows = np.concatenate([x.ravel() for x in blocks_r])
+        cols = np.concatenate([x.ravel() for x in blocks_c])
         keys, slot = np.unique(cols.astype(np.int64) * dim + rows, return_inverse=True)
         indices = (keys % dim).astype(np.int32)
         counts = np.bincount(keys // dim, minlength=dim)
@@ -196,7 +223,10 @@ def _sparse_values(lin: Linearization) -> NDArray[np.float64]:
     """Block values in the order of _SparsePattern's entries."""
     off = lin.pose_off.ravel()
     cross = lin.cross.ravel()
-    return np.concatenate([lin.pose_diag.ravel(), off, off, cross, cross, lin.object_diag.ravel()])
+    pc = lin.pose_calib.ravel()
+    return np.concatenate(
+        [lin.pose_diag.ravel(), off, off, cross, cross, lin.object_diag.ravel(), pc, pc, lin.calib_diag.ravel()]
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -244,9 +274,11 @@ class AssociationSystem:
         self.dense_object_limit = dense_object_limit
         self.n_poses = problem.pose_count
         self.n_objects = len(layout.labels)
+        self.n_calib = problem.calibration_dim
         self.z = np.ascontiguousarray(problem.measurements[layout.measurements].T)  # (4, A)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[layout.measurements].T)
         self.inc_inv_sigma = 1.0 / problem.increment_stddev
+        self.calib_inv_sigma = 1.0 / problem.calibration_prior_stddev
         self.prior_mean = problem.prior_mean[layout.labels]
         self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.labels]
         self.log_normalizer = (
@@ -257,52 +289,98 @@ class AssociationSystem:
 
     @property
     def dimension(self) -> int:
-        return POSE_DIM * self.n_poses + OBJECT_DIM * self.n_objects
+        return POSE_DIM * self.n_poses + OBJECT_DIM * self.n_objects + self.n_calib
 
-    def _odometry(self, poses: NDArray) -> tuple[float, NDArray, NDArray, NDArray, NDArray]:
+    def _odometry(self, poses: NDArray, calib: NDArray) -> tuple[float, NDArray, NDArray, NDArray, NDArray, tuple]:
         """Odometry factors: cost, and their normal-equation blocks in closed form.
 
-        Error ``e = (R_i^T (t_j - t_i) - u_xy, wrap(theta_j - theta_i - u_theta))``, whitened
-        by ``w`` (x, y) and ``w_t`` (theta). With ``d = t_j - t_i`` the Gram blocks are
-        ``Ji^T Ji = w^2 [[1, 0, -d_y], [0, 1, d_x], [-d_y, d_x, |d|^2]] + w_t^2 e3 e3^T``,
-        ``Jj^T Jj = diag(w^2, w^2, w_t^2)``, ``Ji^T Jj = [[-w^2, 0, 0], [0, -w^2, 0],
-        [w^2 d_y, -w^2 d_x, -w_t^2]]``. Returns (cost, diag_i, diag_j, off, grad (N, 3)).
+        Error ``e = (k R_i^T (t_j - t_i) - u_xy, wrap(m dtheta + b L - u_theta))`` with
+        ``k = 1 + s_d``, ``m = 1 + s_t`` and ``dtheta = wrap(theta_j - theta_i)`` (without the
+        calibration ``k = m = 1``, ``b = 0``), whitened by ``w`` (x, y) and ``w_t`` (theta).
+        With ``d = t_j - t_i`` the Gram blocks are ``Ji^T Ji = k^2 w^2 [[1, 0, -d_y], [0, 1, d_x],
+        [-d_y, d_x, |d|^2]] + m^2 w_t^2 e3 e3^T``, ``Jj^T Jj = diag(k^2 w^2, k^2 w^2, m^2 w_t^2)``,
+        ``Ji^T Jj = [[-k^2 w^2, 0, 0], [0, -k^2 w^2, 0], [k^2 w^2 d_y, -k^2 w^2 d_x, -m^2 w_t^2]]``.
+        Returns (cost, diag_i, diag_j, off, grad (N, 3), the terms :meth:`_calibration_blocks` needs).
         """
         pi, pj = poses[:-1], poses[1:]
         c, s = np.cos(pi[:, 2]), np.sin(pi[:, 2])
         dx, dy = pj[:, 0] - pi[:, 0], pj[:, 1] - pi[:, 1]
         u = self.problem.increments
         w, wt = self.inc_inv_sigma[:, 0], self.inc_inv_sigma[:, 2]
-        e1 = w * (c * dx + s * dy - u[:, 0])
-        e2 = w * (-s * dx + c * dy - u[:, 1])
-        e3 = wt * wrap_angle(pj[:, 2] - pi[:, 2] - u[:, 2])
+        q1, q2 = c * dx + s * dy, -s * dx + c * dy  # R_i^T d
+        if self.n_calib:
+            k, m = 1.0 + calib[0], 1.0 + calib[1]
+            dtheta = wrap_angle(pj[:, 2] - pi[:, 2])
+            e3 = wt * wrap_angle(m * dtheta + calib[2] * self.problem.increment_path_length_m - u[:, 2])
+        else:
+            k = m = 1.0
+            dtheta = None
+            e3 = wt * wrap_angle(pj[:, 2] - pi[:, 2] - u[:, 2])
+        e1 = w * (k * q1 - u[:, 0])
+        e2 = w * (k * q2 - u[:, 1])
         cost = 0.5 * float(np.sum(e1 * e1) + np.sum(e2 * e2) + np.sum(e3 * e3))
-        w2, wt2 = w * w, wt * wt
-        m = len(pi)
-        diag_i = np.zeros((m, 3, 3))
+        w2, wt2 = w * w * (k * k), wt * wt * (m * m)
+        n_factors = len(pi)
+        diag_i = np.zeros((n_factors, 3, 3))
         diag_i[:, 0, 0] = diag_i[:, 1, 1] = w2
         diag_i[:, 0, 2] = diag_i[:, 2, 0] = -w2 * dy
         diag_i[:, 1, 2] = diag_i[:, 2, 1] = w2 * dx
         diag_i[:, 2, 2] = w2 * (dx * dx + dy * dy) + wt2
-        diag_j = np.zeros((m, 3, 3))
+        diag_j = np.zeros((n_factors, 3, 3))
         diag_j[:, 0, 0] = diag_j[:, 1, 1] = w2
         diag_j[:, 2, 2] = wt2
-        off = np.zeros((m, 3, 3))
+        off = np.zeros((n_factors, 3, 3))
         off[:, 0, 0] = off[:, 1, 1] = -w2
         off[:, 2, 0] = w2 * dy
         off[:, 2, 1] = -w2 * dx
         off[:, 2, 2] = -wt2
+        wk, wtm = w * k, wt * m
         a, b = -s * dx + c * dy, -c * dx - s * dy  # d(R_i^T d)/d theta_i
-        grad = np.zeros((m + 1, 3))
-        grad[:-1, 0] = w * (-c * e1 + s * e2)
-        grad[:-1, 1] = w * (-s * e1 - c * e2)
-        grad[:-1, 2] = w * (a * e1 + b * e2) - wt * e3
-        grad[1:, 0] += w * (c * e1 - s * e2)
-        grad[1:, 1] += w * (s * e1 + c * e2)
-        grad[1:, 2] += wt * e3
-        return cost, diag_i, diag_j, off, grad
+        grad = np.zeros((n_factors + 1, 3))
+        grad[:-1, 0] = wk * (-c * e1 + s * e2)
+        grad[:-1, 1] = wk * (-s * e1 - c * e2)
+        grad[:-1, 2] = wk * (a * e1 + b * e2) - wtm * e3
+        grad[1:, 0] += wk * (c * e1 - s * e2)
+        grad[1:, 1] += wk * (s * e1 + c * e2)
+        grad[1:, 2] += wtm * e3
+        return cost, diag_i, diag_j, off, grad, (w, wt, k, m, dx, dy, q1, q2, dtheta, e1, e2, e3)
 
-    def linearize(self, poses: NDArray, objects: NDArray) -> Linearization:
+    def _calibration_blocks(self, calib: NDArray, terms: tuple) -> tuple[float, NDArray, NDArray, NDArray]:
+        """Calibration blocks of the odometry factors (``terms`` of :meth:`_odometry`), plus its prior.
+
+        With ``J_c`` the factor's columns of ``(s_d, s_t, b)``: ``w (q, 0, 0)`` on the x, y
+        rows (``q = R_i^T d``), ``w_t (0, dtheta, L)`` on the theta row, the pose-calibration
+        blocks are ``Ji^T J_c = -Jj^T J_c = -[[k w^2 d_x, 0, 0], [k w^2 d_y, 0, 0],
+        [0, m w_t^2 dtheta, m w_t^2 L]]``. Returns (prior cost, grad (C,), pose_calib (N, 3, C),
+        calib_diag (C, C)).
+        """
+        nc = self.n_calib
+        if not nc:
+            return 0.0, np.zeros(0), np.zeros((self.n_poses, POSE_DIM, 0)), np.zeros((0, 0))
+        w, wt, k, m, dx, dy, q1, q2, dtheta, e1, e2, e3 = terms
+        length = self.problem.increment_path_length_m
+        w2, wt2 = w * w, wt * wt
+        prior = calib * self.calib_inv_sigma
+        grad = (
+            np.array([np.sum(w * (q1 * e1 + q2 * e2)), np.sum(wt * dtheta * e3), np.sum(wt * length * e3)])
+            + prior * self.calib_inv_sigma
+        )
+        calib_diag = np.diag(self.calib_inv_sigma**2)
+        calib_diag[0, 0] += np.sum(w2 * (q1 * q1 + q2 * q2))
+        calib_diag[1, 1] += np.sum(wt2 * dtheta * dtheta)
+        calib_diag[2, 2] += np.sum(wt2 * length * length)
+        calib_diag[1, 2] = calib_diag[2, 1] = calib_diag[1, 2] + np.sum(wt2 * dtheta * length)
+        block = np.zeros((len(dx), POSE_DIM, CALIBRATION_DIM))
+        block[:, 0, 0] = k * w2 * dx
+        block[:, 1, 0] = k * w2 * dy
+        block[:, 2, 1] = m * wt2 * dtheta
+        block[:, 2, 2] = m * wt2 * length
+        pose_calib = np.zeros((self.n_poses, POSE_DIM, CALIBRATION_DIM))
+        pose_calib[:-1] -= block
+        pose_calib[1:] += block
+        return 0.5 * float(prior @ prior), grad, pose_calib, calib_diag
+
+    def linearize(self, poses: NDArray, objects: NDArray, calib: NDArray) -> Linearization:
         n, k = self.n_poses, self.n_objects
         lay = self.layout
         obj = objects[lay.object_of]
@@ -315,12 +393,15 @@ class AssociationSystem:
         jac = pred.jacobian * self.inv_sigma[:, None, :]  # (4, 6, A)
         jac_pose = jac[:, :3] * _POSE_SIGN[None, :, None]  # (4, 3, A)
         jac_object = jac[:, _OBJECT_COLUMNS]  # (4, 5, A)
-        odo_cost, diag_i, diag_j, pose_off, grad_pose = self._odometry(poses)
+        odo_cost, diag_i, diag_j, pose_off, grad_pose, terms = self._odometry(poses, calib)
+        calib_cost, grad_calib, pose_calib, calib_diag = self._calibration_blocks(calib, terms)
         first = poses[0] - self.problem.odometry_poses[0]
         first[2] = wrap_angle(first[2])
         first /= self.problem.first_pose_stddev
         pr = (objects - self.prior_mean) * self.prior_inv_sigma
         cost = odo_cost + 0.5 * float(np.sum(first**2) + np.sum(sl**2) + np.sum(pr**2))
+        if self.n_calib:
+            cost += calib_cost
 
         pose_diag = _bin_sum(lay.pose_bins, np.einsum("kim,kjm->ijm", jac_pose, jac_pose), (n, 3, 3))
         pose_diag[:-1] += diag_i
@@ -338,7 +419,17 @@ class AssociationSystem:
             grad_object += np.add.reduceat(np.einsum("kim,km->im", jac_object, sl), lay.starts, axis=1).T
         cross = np.einsum("kim,kjm->ijm", jac_pose, jac_object)
         return Linearization(
-            cost, True, grad_pose.ravel(), grad_object.ravel(), pose_diag, pose_off, cross, object_diag
+            cost,
+            True,
+            grad_pose.ravel(),
+            grad_object.ravel(),
+            pose_diag,
+            pose_off,
+            cross,
+            object_diag,
+            grad_calib,
+            pose_calib,
+            calib_diag,
         )
 
     def factorize(self, lin: Linearization, damping: float) -> Factorization:
@@ -352,49 +443,63 @@ class AssociationSystem:
             fac = self._factorize_sparse(lin, damping)
         # Decrease of the quadratic model: 1/2 (-g^T step + damping step^T diag(Lambda) step).
         predicted = -float(lin.grad_pose @ fac.step_pose + lin.grad_object @ fac.step_object)
+        if self.n_calib:
+            predicted -= float(lin.grad_calib @ fac.step_calib)
         if damping > 0.0:
-            diag_pose, diag_object = lin.diagonal()
+            diag_pose, diag_object, diag_calib = lin.diagonal()
             predicted += damping * float(diag_pose @ fac.step_pose**2 + diag_object @ fac.step_object**2)
+            if self.n_calib:
+                predicted += damping * float(diag_calib @ fac.step_calib**2)
         fac.predicted_decrease = 0.5 * predicted
         return fac
 
     def _factorize_schur(self, lin: Linearization, damping: float) -> Factorization:
         """Poses first: with A = U^T U, W = U^-T B and w = U^-T g_pose, S = C - W^T W,
-        step_object = S^-1 (W^T w - g_object), step_pose = -U^-1 (w + W step_object)."""
-        n, k = self.n_poses, self.n_objects
+        step_dense = S^-1 (W^T w - g_dense), step_pose = -U^-1 (w + W step_dense).
+
+        The dense variables are the objects, then the calibration (if estimated): ``B`` holds
+        their pose blocks, ``C`` their own (objects and calibration share no factor)."""
+        n, k, nc = self.n_poses, self.n_objects, self.n_calib
+        n_object_vars = OBJECT_DIM * k
         diag_at, diag_src, off_at, off_src = _band_index(n)
-        pose_diag, object_diag = lin.pose_diag, lin.object_diag
+        pose_diag, object_diag, calib_diag = lin.pose_diag, lin.object_diag, lin.calib_diag
         if damping > 0.0:
-            pose_diag, object_diag = pose_diag.copy(), object_diag.copy()
+            pose_diag, object_diag, calib_diag = pose_diag.copy(), object_diag.copy(), calib_diag.copy()
             i3, i5 = np.arange(POSE_DIM), np.arange(OBJECT_DIM)
             pose_diag[:, i3, i3] *= 1.0 + damping
             object_diag[:, i5, i5] *= 1.0 + damping
+            calib_diag[np.diag_indices(nc)] *= 1.0 + damping
         band = np.zeros((_BAND + 1, POSE_DIM * n))
         band[diag_at] = pose_diag.ravel()[diag_src]
         band[off_at] = lin.pose_off.ravel()[off_src]
         chol_pose = scipy.linalg.cholesky_banded(band, lower=False, check_finite=False)
         log_det = 2.0 * float(np.sum(np.log(chol_pose[_BAND])))
-        rhs = np.empty((POSE_DIM * n, OBJECT_DIM * k + 1), order="F")
-        rhs[:, :-1] = lin.pose_object(self.layout)
+        rhs = np.empty((POSE_DIM * n, n_object_vars + nc + 1), order="F")
+        rhs[:, :n_object_vars] = lin.pose_object(self.layout)
+        rhs[:, n_object_vars:-1] = lin.pose_calib.reshape(POSE_DIM * n, nc)
         rhs[:, -1] = lin.grad_pose
         whitened, info = lapack.dtbtrs(chol_pose, rhs, uplo="U", trans="T", overwrite_b=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
         w_cross, w_grad = whitened[:, :-1], whitened[:, -1]
         chol_schur = None
-        step_object = np.zeros(0)
-        if k:
+        step_dense = np.zeros(0)
+        if n_object_vars + nc:
             schur = -(w_cross.T @ w_cross)
             schur[_block_diag_index(k, OBJECT_DIM)] += object_diag.ravel()
+            schur[n_object_vars:, n_object_vars:] += calib_diag
+            grad_dense = np.concatenate([lin.grad_object, lin.grad_calib]) if nc else lin.grad_object
             chol_schur = scipy.linalg.cholesky(schur, lower=False, check_finite=False)
             log_det += 2.0 * float(np.sum(np.log(np.diag(chol_schur))))
-            step_object = scipy.linalg.cho_solve(
-                (chol_schur, False), w_cross.T @ w_grad - lin.grad_object, check_finite=False
+            step_dense = scipy.linalg.cho_solve(
+                (chol_schur, False), w_cross.T @ w_grad - grad_dense, check_finite=False
             )
-        back, info = lapack.dtbtrs(chol_pose, (w_grad + w_cross @ step_object)[:, None], uplo="U", trans="N")
+        back, info = lapack.dtbtrs(chol_pose, (w_grad + w_cross @ step_dense)[:, None], uplo="U", trans="N")
         if info != 0:
             raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
-        return Factorization(log_det, -back[:, 0], step_object, 0.0, chol_schur=chol_schur)
+        return Factorization(
+            log_det, -back[:, 0], step_dense[:n_object_vars], 0.0, step_dense[n_object_vars:], chol_schur=chol_schur
+        )
 
     def _factorize_sparse(self, lin: Linearization, damping: float) -> Factorization:
         pattern = self.layout.sparse
@@ -411,21 +516,41 @@ class AssociationSystem:
         pivots = lu.U.diagonal()
         if np.any(pivots <= 0.0):
             raise np.linalg.LinAlgError("normal equations are not positive definite")
-        step = lu.solve(-np.concatenate([lin.grad_pose, lin.grad_object]))
+        step = lu.solve(-np.concatenate([lin.grad_pose, lin.grad_object, lin.grad_calib]))
         split = POSE_DIM * self.n_poses
-        return Factorization(float(np.sum(np.log(pivots))), step[:split], step[split:], 0.0, sparse_lu=lu)
+        split_calib = split + OBJECT_DIM * self.n_objects
+        return Factorization(
+            float(np.sum(np.log(pivots))),
+            step[:split],
+            step[split:split_calib],
+            0.0,
+            step[split_calib:],
+            sparse_lu=lu,
+        )
+
+    def _dense_inverse_columns(self, fac: Factorization, first: int, count: int) -> NDArray[np.float64]:
+        """Rows and columns [first, first + count) of the inverse over the dense variables."""
+        if fac.chol_schur is not None:
+            unit = np.zeros((len(fac.chol_schur), count))
+            unit[first : first + count] = np.eye(count)
+            inv = scipy.linalg.cho_solve((fac.chol_schur, False), unit, check_finite=False)
+            return inv[first : first + count]
+        split = POSE_DIM * self.n_poses
+        unit = np.zeros((split + OBJECT_DIM * self.n_objects + self.n_calib, count))
+        unit[split + first : split + first + count] = np.eye(count)
+        return fac.sparse_lu.solve(unit)[split + first : split + first + count]
 
     def object_covariance(self, fac: Factorization) -> NDArray[np.float64]:
         """(K, 5, 5) marginal covariance blocks of the objects (undamped factorization)."""
         k = self.n_objects
         if not k:
             return np.zeros((0, OBJECT_DIM, OBJECT_DIM))
-        if fac.chol_schur is not None:
-            inv = scipy.linalg.cho_solve((fac.chol_schur, False), np.eye(OBJECT_DIM * k), check_finite=False)
-        else:
-            split = POSE_DIM * self.n_poses
-            unit = np.zeros((split + OBJECT_DIM * k, OBJECT_DIM * k))
-            unit[split:] = np.eye(OBJECT_DIM * k)
-            inv = fac.sparse_lu.solve(unit)[split:]
+        inv = self._dense_inverse_columns(fac, 0, OBJECT_DIM * k)
         blocks = inv.reshape(k, OBJECT_DIM, k, OBJECT_DIM)
         return blocks[np.arange(k), :, np.arange(k), :]
+
+    def calibration_covariance(self, fac: Factorization) -> NDArray[np.float64]:
+        """(C, C) marginal covariance of the odometry calibration (undamped factorization)."""
+        if not self.n_calib:
+            return np.zeros((0, 0))
+        return self._dense_inverse_columns(fac, OBJECT_DIM * self.n_objects, self.n_calib)

@@ -12,6 +12,10 @@ sampler (:func:`objslam_mapper.solver.solve`). It holds
   elevation top), its noise, the pose it was seen from, its class; ``measurement_image``
   and ``measurement_slot`` lead back to the input ``images[i].slices[k]``. Slices of
   low confidence (likely cut short) get inflated noise;
+- when ``odometry.calibration.enabled``, the zero-mean prior of the odometry calibration
+  ``c = (distance_scale, turn_scale, turn_bias_rad_per_m)`` (one variable per map, see
+  :mod:`objslam_mapper.normal_equations`) and each increment's measured path length, which
+  the turn bias multiplies;
 - the class priors (paper eqs. 7-8) as per-class means and standard deviations of the
   object vector ``(x, y, z_base, diameter, height)``: ``x, y`` weak around the first
   pose (``xy_stddev_m``), ``z_base`` and the size from the catalog;
@@ -41,6 +45,7 @@ logger = logging.getLogger(__name__)
 
 OBJECT_DIM = 5  # x, y, z_base, diameter, height
 POSE_DIM = 3
+CALIBRATION_DIM = 3  # distance scale, turn scale, turn bias per metre
 LOG_2PI = float(np.log(2.0 * np.pi))
 
 
@@ -73,6 +78,8 @@ class GraphProblem:
     increments: NDArray[np.float64]  # (N-1, 3) odometry between consecutive poses
     increment_stddev: NDArray[np.float64]  # (N-1, 3)
     first_pose_stddev: NDArray[np.float64]  # (3,)
+    increment_path_length_m: NDArray[np.float64]  # (N-1,) odometry path length of each increment
+    calibration_prior_stddev: NDArray[np.float64]  # (C,): (3,) when the calibration is estimated, else (0,)
     # Measurements (M)
     measurements: NDArray[np.float64]  # (M, 4) bearing, width, elevation bottom, top (rad)
     measurement_stddev: NDArray[np.float64]  # (M, 4)
@@ -85,7 +92,7 @@ class GraphProblem:
     prior_mean: NDArray[np.float64]  # (L, 5)
     prior_stddev: NDArray[np.float64]  # (L, 5)
     # Log-normalizers of the Gaussian factors
-    trajectory_log_normalizer: float  # odometry factors + first-pose prior
+    trajectory_log_normalizer: float  # odometry factors + first-pose prior + calibration prior
     measurement_log_normalizer: NDArray[np.float64]  # (M,)
     prior_log_normalizer: NDArray[np.float64]  # (L,)
     rejected_image_count: int = 0
@@ -94,6 +101,11 @@ class GraphProblem:
     @property
     def pose_count(self) -> int:
         return len(self.stamps_ns)
+
+    @property
+    def calibration_dim(self) -> int:
+        """3 when the odometry calibration is a variable of the graph, else 0."""
+        return len(self.calibration_prior_stddev)
 
     @property
     def measurement_count(self) -> int:
@@ -176,7 +188,11 @@ def build_problem(
     prior_stddev = np.array(
         [[c.xy_stddev_m, c.xy_stddev_m, c.z_base_stddev_m, c.diameter_stddev_m, c.height_stddev_m] for c in classes]
     )
+    calibration = config.odometry.calibration
+    calib_stddev = np.array(calibration.prior_stddev() if calibration.enabled else (), dtype=float)
     trajectory_norm = float(np.sum(gaussian_log_normalizer(inc_stddev)) + gaussian_log_normalizer(first_stddev))
+    if calibration.enabled:
+        trajectory_norm += float(gaussian_log_normalizer(calib_stddev))
     problem = GraphProblem(
         mount=mount,
         solver=config.solver,
@@ -187,6 +203,8 @@ def build_problem(
         increments=_readonly(increments),
         increment_stddev=_readonly(inc_stddev),
         first_pose_stddev=_readonly(first_stddev),
+        increment_path_length_m=_readonly(np.abs(np.diff(at.path_length_m))),
+        calibration_prior_stddev=_readonly(calib_stddev),
         measurements=_readonly(np.array(rows, dtype=float).reshape(-1, 4)),
         measurement_stddev=_readonly(meas_stddev),
         measurement_pose=_readonly(np.array(pose_of, dtype=np.int64)),

@@ -18,11 +18,18 @@ The Laplace approximation of the evidence (paper eq. 25) at the MAP ``theta*`` i
                      + d/2 log(2 pi) - 1/2 log|Lambda|,
 
 summed over every factor of the graph (odometry, first-pose prior, assigned slices,
-object priors), with ``d = 3N + 5K`` and ``Lambda = J^T Sigma^-1 J`` the Gauss-Newton
+object priors, and the odometry calibration's prior when it is estimated), with
+``d = 3N + 5K (+ 3 for the calibration)`` and ``Lambda = J^T Sigma^-1 J`` the Gauss-Newton
 information at the MAP (``2 log|R|`` of GTSAM's square-root information). Measurements in no
 group are not part of the graph: the sampler scores them with its clutter model. A new
 object pays its Occam price through its prior's normalizer and its ``5/2 log 2 pi -
 1/2 log|information|``. Object marginal covariances come from the same factorization.
+
+With ``odometry.calibration.enabled`` the state also holds the odometry calibration ``c``
+(distance scale, turn scale, turn bias per metre; one per map, model in
+:mod:`objslam_mapper.normal_equations`): it starts from the warm start's or from 0, its
+zero-mean prior's normalizer is part of ``problem.trajectory_log_normalizer``, it adds 3 to
+``d``, and its MAP and marginal covariance are ``GraphSolution.calibration(_cov)``.
 
 API (what the association sampler calls)::
 
@@ -40,7 +47,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -89,6 +96,17 @@ class GraphSolution:
     log_evidence: float
     chi2: float
     log_det_information: float
+    # Odometry calibration (distance scale, turn scale, turn bias rad/m): (3,) MAP and (3, 3)
+    # marginal covariance when the problem estimates it, else (0,) / (0, 0); covariance None unless asked for.
+    calibration: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    calibration_cov: NDArray[np.float64] | None = None
+
+
+def initial_calibration(problem: GraphProblem, warm_start: GraphSolution | None) -> NDArray:
+    """The warm start's calibration, else the prior mean (no systematic error)."""
+    if warm_start is not None and len(warm_start.calibration) == problem.calibration_dim:
+        return np.array(warm_start.calibration, dtype=float)
+    return np.zeros(problem.calibration_dim)
 
 
 def initial_state(problem: GraphProblem, layout: Layout, warm_start: GraphSolution | None) -> tuple[NDArray, NDArray]:
@@ -147,13 +165,15 @@ def solve(
     layout = layout_of(problem, groups)
     graph = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
     poses, objects = initial_state(problem, layout, warm_start)
+    calib = initial_calibration(problem, warm_start)
 
-    lin = graph.linearize(poses, objects)
+    lin = graph.linearize(poses, objects, calib)
     if not lin.valid:
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
-        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None)
+        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
-    poses, objects, lin, final, iterations, converged = _minimize(graph, poses, objects, lin, problem.solver, limit)
+    state, lin, final, iterations, converged = _minimize(graph, (poses, objects, calib), lin, problem.solver, limit)
+    poses, objects, calib = state
     if final is None:
         final = graph.factorize(lin, 0.0)
     if not converged:
@@ -161,19 +181,33 @@ def solve(
 
     log_evidence = -lin.cost + graph.log_normalizer + 0.5 * graph.dimension * LOG_2PI - 0.5 * final.log_det
     covariance = graph.object_covariance(final) if with_covariances else None
+    calib_cov = graph.calibration_covariance(final) if with_covariances else None
     return make_solution(
-        problem, layout, poses, objects, iterations, converged, log_evidence, 2.0 * lin.cost, final.log_det, covariance
+        problem,
+        layout,
+        poses,
+        objects,
+        iterations,
+        converged,
+        log_evidence,
+        2.0 * lin.cost,
+        final.log_det,
+        covariance,
+        calib,
+        calib_cov,
     )
+
+
+_State = tuple[NDArray, NDArray, NDArray]  # poses (N, 3), objects (K, 5), calibration (C,)
 
 
 def _minimize(
     graph: AssociationSystem,
-    poses: NDArray,
-    objects: NDArray,
+    state: _State,
     lin: Linearization,
     cfg: SolverConfig,
     max_iterations: int,
-) -> tuple[NDArray, NDArray, Linearization, Factorization | None, int, bool]:
+) -> tuple[_State, Linearization, Factorization | None, int, bool]:
     """Gauss-Newton steps while they work, Levenberg-Marquardt damping when they do not.
 
     The damping follows Nielsen (1999): after a step with gain ratio rho (actual over
@@ -194,27 +228,28 @@ def _minimize(
             continue
         tolerance = cfg.absolute_tolerance + cfg.relative_tolerance * lin.cost
         if fac.predicted_decrease <= tolerance and damping <= cfg.initial_lambda:
-            return poses, objects, lin, fac if damping == 0.0 else None, iterations, True
+            return state, lin, fac if damping == 0.0 else None, iterations, True
+        poses, objects, calib = state
         new_poses = poses + fac.step_pose.reshape(-1, POSE_DIM)
         new_poses[:, 2] = wrap_angle(new_poses[:, 2])
-        new_objects = objects + fac.step_object.reshape(-1, OBJECT_DIM)
-        new_lin = graph.linearize(new_poses, new_objects)
+        new_state = (new_poses, objects + fac.step_object.reshape(-1, OBJECT_DIM), calib + fac.step_calib)
+        new_lin = graph.linearize(*new_state)
         iterations += 1
         if new_lin.valid and new_lin.cost <= lin.cost:
             decrease = lin.cost - new_lin.cost
             rho = decrease / max(fac.predicted_decrease, 1e-300)
-            poses, objects, lin = new_poses, new_objects, new_lin
+            state, lin = new_state, new_lin
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             growth = 2.0
             if damping < 1e-3 * cfg.initial_lambda:
                 damping = 0.0
             if decrease <= tolerance and damping <= cfg.initial_lambda:
-                return poses, objects, lin, None, iterations, True
+                return state, lin, None, iterations, True
         else:
             damping, growth = max(cfg.initial_lambda, damping * growth), 2.0 * growth
             if damping > cfg.max_lambda:
                 break
-    return poses, objects, lin, None, iterations, False
+    return state, lin, None, iterations, False
 
 
 def make_solution(
@@ -228,6 +263,8 @@ def make_solution(
     chi2: float,
     log_det: float,
     covariance: NDArray | None,
+    calibration: NDArray | None = None,
+    calibration_cov: NDArray | None = None,
 ) -> GraphSolution:
     estimates = tuple(
         ObjectEstimate(
@@ -242,7 +279,8 @@ def make_solution(
     )
     object_of = np.full(problem.measurement_count, -1, dtype=np.int64)
     object_of[layout.measurements] = layout.object_of
-    for array in (poses, objects, object_of):
+    calibration = np.zeros(problem.calibration_dim) if calibration is None else np.array(calibration, dtype=float)
+    for array in (poses, objects, object_of, calibration):
         array.flags.writeable = False
     return GraphSolution(
         map_T_base=poses,
@@ -253,4 +291,6 @@ def make_solution(
         log_evidence=float(log_evidence),
         chi2=float(chi2),
         log_det_information=float(log_det),
+        calibration=calibration,
+        calibration_cov=calibration_cov,
     )

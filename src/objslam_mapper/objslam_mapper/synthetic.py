@@ -101,11 +101,15 @@ def simulate_run(
     odometry_noise_scale: float = 1.0,
     slice_noise_scale: float = 1.0,
     range_limits_m: tuple[float, float] = (0.5, 5.0),
+    odometry_calibration: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> SyntheticRun:
     """Odometry at ``stamps_ns`` (true poses ``true_poses``) and slices at ``image_stamps_ns``.
 
     Images default to the odometry stamps. Image poses are the true poses interpolated
     like the mapper does, so an exact run is exactly consistent with the model.
+    ``odometry_calibration`` = (distance scale, turn scale, turn bias rad/m) is a systematic
+    odometry error, applied to each true increment as the graph models it
+    (:mod:`objslam_mapper.normal_equations`) before the random noise.
     """
     config = config or GraphConfig()
     mount = mount or config.camera_mount.to_mount()
@@ -116,7 +120,11 @@ def simulate_run(
     # Odometry: true increments plus random-walk noise of the model, chained from the true start.
     increments = [between(a, b) for a, b in itertools.pairwise(true_poses)]
     odometry_poses = [true_poses[0]]
+    distance_scale, turn_scale, turn_bias = odometry_calibration
     for inc in increments:
+        if any(odometry_calibration):
+            length = float(np.hypot(inc[0], inc[1]))
+            inc = np.r_[(1.0 + distance_scale) * inc[:2], (1.0 + turn_scale) * inc[2] + turn_bias * length]
         sd = increment_stddev(np.hypot(inc[0], inc[1]), abs(inc[2]), config.odometry)
         noisy = inc + odometry_noise_scale * sd * rng.standard_normal(3)
         odometry_poses.append(compose(odometry_poses[-1], noisy))

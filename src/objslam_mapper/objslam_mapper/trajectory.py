@@ -12,6 +12,10 @@ not its chord),
 
     var_xy    = xy_per_sqrt_m^2 s + xy_per_sqrt_rad^2 t + min_xy^2        (each of x, y)
     var_theta = theta_per_sqrt_m^2 s + theta_per_sqrt_rad^2 t + min_theta^2
+
+The systematic part of the odometry error (distance and turn scales, turn bias per metre)
+is not noise: the graph estimates it as a variable (``odometry.calibration``, see
+:mod:`objslam_mapper.normal_equations`), using ``s`` of each increment for the bias.
 """
 
 from __future__ import annotations
