@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import re
 import sys
 import textwrap
-import time
 
 import pytest
 import yaml
@@ -61,9 +61,9 @@ BAD_THEN_GOOD = textwrap.dedent(
         msg.header.frame_id = "camera"
         msg.data = bytes(width * height * channels)
         return msg
-    for _ in range(20):  # before any camera info (best effort: send plenty)
+    for _ in range(40):  # before any camera info: more than the node holds (best effort: send plenty)
         raw_pub.publish(image("rgb8", 640, 640, 3))
-        time.sleep(0.1)
+        time.sleep(0.05)
     info = CameraInfo(width=640, height=640, distortion_model="unified", d=[0.9])
     info.k = [170.0, 0.0, 320.0, 0.0, 170.0, 320.0, 0.0, 0.0, 1.0]
     for _ in range(20):
@@ -73,6 +73,8 @@ BAD_THEN_GOOD = textwrap.dedent(
         for _ in range(5):
             raw_pub.publish(bad)
             time.sleep(0.1)
+    time.sleep(0.5)
+    print("bad frames sent", flush=True)
     for _ in range(100):
         info_pub.publish(info)
         raw_pub.publish(image("rgb8", 640, 640, 3))
@@ -83,11 +85,11 @@ BAD_THEN_GOOD = textwrap.dedent(
 
 def test_bad_frames_are_skipped_with_a_warning_and_the_node_keeps_running(processes):
     detector = processes.start(objslam_cmd("detector"))
-    processes.start([sys.executable, "-c", BAD_THEN_GOOD])
+    talker = processes.start([sys.executable, "-c", BAD_THEN_GOOD])
     result = processes.run(objslam_cmd("echo", "/objslam/slices", "--once", "--timeout", "60"), timeout=90)
     assert result.returncode == 0, result.stderr
     assert _first_message(result.stdout)["slices"] == []  # a black image has no objects
-    time.sleep(0.5)
+    assert talker.stdout.readline().strip() == "bad frames sent"
     assert detector.poll() is None
     detector.terminate()
     _out, err = detector.communicate(timeout=10)
@@ -95,4 +97,6 @@ def test_bad_frames_are_skipped_with_a_warning_and_the_node_keeps_running(proces
     assert "unsupported image encoding 'yuv422'" in err
     assert "image is 320x320 px but the camera calibration is 640x640 px" in err
     assert "skipped {'no camera info'" in err  # the summary at shutdown counts what was skipped
+    held = re.search(r"processed (\d+) frames", err)
+    assert held and int(held.group(1)) >= 10  # the images held for the camera info were not lost
     assert "Traceback" not in err

@@ -2,14 +2,17 @@
 
 A thin wrapper over :class:`objslam_detector.detector.Detector`. A frame that cannot be
 used (unsupported encoding, size not matching the calibration, corrupt compressed data,
-no camera info yet) is skipped with a rate-limited warning saying why, and counted.
+no camera info yet: the latest few images are held until it comes) is skipped with a
+rate-limited warning saying why, and counted.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from rclpy.node import Node
@@ -31,6 +34,7 @@ from objslam_msgs.msg import Slice, SliceArray
 SLICES_TOPIC = "/objslam/slices"
 DEBUG_IMAGE_TOPIC = "/objslam/detector/debug_image"
 WARN_PERIOD_S = 5.0
+PENDING_IMAGES = 10
 
 
 def slice_to_msg(detected: DetectedSlice) -> Slice:
@@ -60,6 +64,9 @@ class DetectorNode(Node):
         self.skipped: Counter[str] = Counter()
         self.processed = 0
         self._last_warned: dict[str, float] = {}
+        # Camera info and the first images arrive together, in an order the executor picks:
+        # hold the latest few images until the calibration is known instead of losing them.
+        self._pending: deque[tuple[Any, Callable[[], tuple[np.ndarray, str]]]] = deque()
 
         self.slices_pub = self.create_publisher(SliceArray, SLICES_TOPIC, QoSProfile(depth=100))
         self.debug_pub = (
@@ -90,6 +97,8 @@ class DetectorNode(Node):
             self.get_logger().warn(f"ignoring camera info: {exc}", throttle_duration_sec=WARN_PERIOD_S)
             return
         self.camera = camera
+        while self._pending:
+            self._process(*self._pending.popleft())
 
     def on_raw(self, msg: Image) -> None:
         self._process(
@@ -115,11 +124,15 @@ class DetectorNode(Node):
 
     def _process(self, header, decode) -> None:
         if self.camera is None:
-            self.skipped["no camera info"] += 1
             self.get_logger().warn(
-                f"waiting for camera info on {self.config.camera_info_topic}; skipping images until it arrives",
+                f"waiting for camera info on {self.config.camera_info_topic}; holding the latest "
+                f"{PENDING_IMAGES} images and skipping older ones until it arrives",
                 once=True,
             )
+            if len(self._pending) == PENDING_IMAGES:
+                self._pending.popleft()
+                self.skipped["no camera info"] += 1
+            self._pending.append((header, decode))
             return
         try:
             image, encoding = decode()
