@@ -7,6 +7,7 @@ behind every measurement is known.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import gtsam
 import numpy as np
@@ -103,14 +104,17 @@ def whitened_residuals(problem, groups, theta):
 
 
 def log_normalizers(problem, groups):
-    """Sum of -1/2 log|2 pi Sigma| over every factor, from the noise standard deviations."""
+    """Sum of -1/2 log|2 pi Sigma| over every factor, from the noise standard deviations,
+    plus each slice's inlier weight log(1 - outlier probability) (objslam_mapper.outliers)."""
     sigmas = [problem.increment_stddev.ravel(), problem.first_pose_stddev, problem.calibration_prior_stddev]
     for group in groups:
         group = np.asarray(group)
         sigmas.append(problem.measurement_stddev[group].ravel())
         sigmas.append(problem.prior_stddev[problem.measurement_label[group[0]]])
     sigmas = np.concatenate(sigmas)
-    return float(np.sum(-0.5 * np.log(2 * np.pi * sigmas**2)))
+    slices = sum(len(g) for g in groups)
+    inlier_weight = slices * np.log1p(-CONFIG.slice_noise.outlier_probability)
+    return float(np.sum(-0.5 * np.log(2 * np.pi * sigmas**2))) + inlier_weight
 
 
 def dense_information(problem, groups, theta, step=1e-6):
@@ -440,15 +444,18 @@ def test_same_map_and_information_as_gtsam(dense_object_limit):
     run, problem = make_run(8, scene=SCENE[:3], n_poses=15, config=tight)
     groups = run.groups(problem)
     ours = solve(problem, groups)
-    # One CustomFactor per detection, solved by GTSAM's own optimizer from the same start.
-    graph, keys = build_gtsam_graph(problem, groups, per_detection=True)
-    initial = keys.to_values(
+    # One CustomFactor per detection, solved by GTSAM's own optimizer from the same start,
+    # in the same two phases: Gaussian slices, then the outlier model.
+    gaussian, keys = build_gtsam_graph(problem, groups, per_detection=True, cap_scale=math.inf)
+    graph, _ = build_gtsam_graph(problem, groups, per_detection=True)
+    result = keys.to_values(
         problem.odometry_poses, [initial_object(problem, group, problem.odometry_poses) for group in groups]
     )
     params = gtsam.LevenbergMarquardtParams()
     params.setRelativeErrorTol(1e-12)
     params.setAbsoluteErrorTol(1e-12)
-    result = gtsam.LevenbergMarquardtOptimizer(graph, initial, params).optimize()
+    for phase in (gaussian, graph):
+        result = gtsam.LevenbergMarquardtOptimizer(phase, result, params).optimize()
     theirs = np.array(
         [[result.atPose2(k).x(), result.atPose2(k).y(), result.atPose2(k).theta()] for k in keys.pose_keys]
     )

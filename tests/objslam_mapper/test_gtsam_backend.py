@@ -9,6 +9,7 @@ marginals; the custom factors' analytic Jacobians are checked against finite dif
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import gtsam
 import numpy as np
@@ -177,7 +178,11 @@ def numerical_jacobian(factor, values, step=1e-6):
 def test_factor_jacobians_match_finite_differences(reference, per_detection, window_poses):
     problem, groups, ours = reference
     rng = np.random.default_rng(1)
-    graph, keys = build_gtsam_graph(problem, groups, per_detection=per_detection, window_poses=window_poses)
+    # The Gaussian factors: at this state many slices lie beyond their outlier cap, whose
+    # Jacobian is zero by design (test_outlier_slices_cost_their_cap_and_carry_no_information).
+    graph, keys = build_gtsam_graph(
+        problem, groups, per_detection=per_detection, window_poses=window_poses, cap_scale=math.inf
+    )
     # A random state near the MAP (the model is defined there), headings across +-pi included.
     poses, objects, calibration = state(ours)
     assert len(calibration) == 3  # the default model estimates the odometry calibration
@@ -198,6 +203,32 @@ def test_factor_jacobians_match_finite_differences(reference, per_detection, win
         assert checked == 1 + (N_POSES - 1) + sum(len(g) for g in groups)
     else:
         assert checked >= 2 + len(groups)
+
+
+def test_outlier_slices_cost_their_cap_and_carry_no_information(reference):
+    problem, groups, ours = reference
+    gaussian, keys = build_gtsam_graph(problem, groups, per_detection=True, cap_scale=math.inf)
+    robust, _ = build_gtsam_graph(problem, groups, per_detection=True)
+    poses, objects, calibration = state(ours)
+    values = keys.to_values(poses, objects + np.array([0.3, 0.0, 0.0, 0.0, 0.0]), calibration)
+    slice_factors = [
+        (k, problem.measurement_outlier_cost[m])
+        for k, m in zip(
+            [i for i in range(robust.size()) if isinstance(robust.at(i), gtsam.CustomFactor)][N_POSES:],
+            np.concatenate(groups),
+            strict=True,
+        )
+    ]
+    outliers = 0
+    for index, cap in slice_factors:
+        half = gaussian.at(index).error(values)
+        factor = robust.at(index)
+        assert factor.error(values) == pytest.approx(min(half, cap), rel=1e-12)
+        if half > cap:
+            outliers += 1
+            jacobian, _ = gtsam.JacobianFactor(factor.linearize(values)).jacobian()
+            assert not jacobian.any()
+    assert outliers > 0  # the 0.3 m shift puts some slices beyond their cap
 
 
 def test_one_factor_per_group_and_window():

@@ -9,7 +9,7 @@ import pytest
 
 from objslam_mapper.association import CLUTTER, Association, enumerate_associations
 from objslam_mapper.catalog import load_catalog
-from objslam_mapper.clutter import ClutterConfig, ClutterModel
+from objslam_mapper.clutter import DISTRACTOR, INDEPENDENT, ClutterConfig, ClutterModel
 from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.inference import (
     NO_OBJECT_LOG_EVIDENCE,
@@ -65,32 +65,56 @@ def test_odometry_chain_alone_has_zero_log_evidence(scene):
     assert evidence == pytest.approx(NO_OBJECT_LOG_EVIDENCE, abs=1e-5)
 
 
-def test_target_is_evidence_plus_clutter_likelihood(scene):
+def test_target_is_the_graph_evidence_with_distractors_plus_the_clutter_terms(scene):
+    """A clutter tracklet explained by a distractor is a group of the graph, with the broad
+    distractor priors; one explained by independent false alarms is outside it."""
     _run, problem, chained = scene
     clutter = ClutterConfig()
     model = ClutterModel(problem, clutter)
-    target = AssociationTarget(problem, chained.tracklets, clutter)
-    members = [list(t.measurement_indices) for t in chained.tracklets]
+    # Every tracklet its own object below: duplicates the no-overlap term would penalize (tested apart).
+    target = AssociationTarget(problem, chained.tracklets, clutter, exclusion=False)
+    members = [np.asarray(t.measurement_indices) for t in chained.tracklets]
     green = chained.labels.index("green")
+    assert target.component(green).kind == DISTRACTOR  # a real object's tracklet fits a static thing
     state = Association.of([CLUTTER if t == green else t for t in range(len(members))])
-    groups = [m for t, m in enumerate(members) if t != green]
-    expected = solve(problem, groups).log_evidence + model.tracklet_log_likelihood(members[green])
-    assert target(state) == pytest.approx(expected, abs=1e-6)
+    objects = [m for t, m in enumerate(members) if t != green]
+    rows = [int(problem.measurement_label[m[0]]) for m in objects] + [model.distractor_row(int(members[green][0]))]
+    graph = solve(model.problem, [*objects, members[green]], priors=rows)
+    assert target(state) == pytest.approx(graph.log_evidence + np.log(clutter.distractor_weight), abs=1e-6)
+    # Its map holds the objects only; the distractor is no map object.
+    assert len(target.summary(state).objects) == len(objects)
+    # Independent false alarms instead (the distractor switched off): outside the graph.
+    off = dataclasses.replace(clutter, distractor_weight=0.0)
+    target_off = AssociationTarget(problem, chained.tracklets, off, exclusion=False)
+    independent = len(members[green]) * off.log_likelihood_per_slice
+    assert target_off(state) == pytest.approx(solve(problem, objects).log_evidence + independent, abs=1e-6)
     all_clutter = Association.of([CLUTTER] * len(members))
-    assert target(all_clutter) == pytest.approx(sum(model.tracklet_log_likelihood(m) for m in members))
+    assert target_off(all_clutter) == pytest.approx(sum(len(m) for m in members) * off.log_likelihood_per_slice)
 
 
-def test_clutter_mixes_independent_false_alarms_and_a_distractor(scene):
+def test_each_tracklet_takes_the_likelier_clutter_component(scene):
     _run, problem, chained = scene
     members = list(chained.tracklets[0].measurement_indices)
     config = ClutterConfig(distractor_weight=0.25)
     model = ClutterModel(problem, config)
     independent = len(members) * config.log_likelihood_per_slice
     distractor = model.distractor_log_evidence(members)
-    mixture = np.log(0.75 * np.exp(independent - distractor) + 0.25) + distractor
-    assert model.tracklet_log_likelihood(members) == pytest.approx(mixture)
-    off = ClutterModel(problem, dataclasses.replace(config, distractor_weight=0.0))
-    assert off.tracklet_log_likelihood(members) == pytest.approx(independent)
+    component = model.component(members)
+    assert component.kind == DISTRACTOR
+    assert component.alone_log_likelihood == pytest.approx(np.log(0.25) + distractor)
+    assert component.alone_log_likelihood > np.log(0.75) + independent
+    off = ClutterModel(problem, dataclasses.replace(config, distractor_weight=0.0)).component(members)
+    assert off.kind == INDEPENDENT and off.log_weight == pytest.approx(independent)
+    # Slices of nothing consistent (drawn uniformly from the measurement space): independent false alarms.
+    rng = np.random.default_rng(0)
+    noise = np.array(problem.measurements)
+    bottom, top = np.sort(rng.uniform(-0.6, 0.6, (2, len(members))), axis=0)
+    noise[members] = np.column_stack(
+        [rng.uniform(-np.pi, np.pi, len(members)), rng.uniform(0.02, 0.5, len(members)), bottom, top]
+    )
+    scattered = ClutterModel(dataclasses.replace(problem, measurements=noise), config).component(members)
+    assert scattered.kind == INDEPENDENT
+    assert scattered.log_weight == pytest.approx(np.log(0.75) + independent)
     # A real object's tracklet is better explained by its class than by a shapeless distractor.
     assert solve(problem, [members]).log_evidence > distractor > independent
 
@@ -102,7 +126,8 @@ def test_a_distractor_explains_a_floating_poster_far_better_than_its_class():
     poster = [m for m in poster if problem.measurement_slot[m] == len(run.images[problem.measurement_image[m]].slices)]
     assert len(poster) == len(POSTER_FRAMES)
     distractor = ClutterModel(problem, ClutterConfig()).distractor_log_evidence(poster)
-    assert distractor > solve(problem, [poster]).log_evidence + 100.0
+    # Its class explains the poster's slices only as outliers (objslam_mapper.outliers).
+    assert distractor > solve(problem, [poster]).log_evidence + 40.0
 
 
 @pytest.mark.slow

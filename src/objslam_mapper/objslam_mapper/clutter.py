@@ -6,7 +6,7 @@ object to be meaningful, both must be densities over the same measurements in th
 units. The object side is the factor graph's Laplace evidence, which includes every
 Gaussian normalizer (:mod:`objslam_mapper.solver`): a density over each slice's 4-vector
 ``(bearing, angular width, elevation bottom, elevation top)`` in rad^-4. The clutter side
-is a mixture of two densities over the same 4-vectors:
+has two components over the same 4-vectors:
 
 independent false alarms (weight ``1 - distractor_weight``)
     false alarms of a class are a Poisson process with ``false_alarm_rate`` expected
@@ -26,31 +26,25 @@ a static distractor (weight ``distractor_weight``)
     object of its class (it floats, or is flat). It is modelled as a cylinder *of unknown
     geometry*: the same slice model, but with broad priors on ``z_base`` and size
     (``distractor_z_base_stddev_m``, ``distractor_size_stddev_m``) instead of the class
-    priors, and ``log L`` its Laplace evidence alone with the odometry chain (whose own
-    evidence is 0). A real object's tracklet prefers its class by the Occam factor of the
-    tighter priors (several nats); a poster that would need ``z_base`` tens of prior
-    standard deviations off the floor prefers the distractor by hundreds.
+    priors. A distractor is a thing in the world like an object, so it is part of the
+    factor graph: each distractor tracklet of the clutter set is one more variable of the
+    association's graph, with those priors (:meth:`ClutterModel.graph_groups`), and its
+    ``log L`` is what it adds to the graph's Laplace evidence, plus ``log w``. It thus
+    gets the trajectory the whole map pins down, as an object does: a tracklet's slices
+    fit the map's trajectory better than the odometry alone (on the ``clutter`` scenario
+    by 50 to 90 nats for 40 to 80 slices), and scoring a distractor with the odometry
+    alone while the objects get the map's would have handed that margin to "object"
+    (a flat patch on the floor, several tracklets merged, then beat clutter). A real
+    object's tracklet still prefers its class by the Occam factor of the tighter priors
+    (several nats); a poster that would need ``z_base`` tens of prior standard deviations
+    off the floor prefers the distractor by hundreds.
 
-    The distractor's evidence is computed with the trajectory to itself: the information
-    its slices carry about the robot's poses is not shared with the objects' graph. That
-    approximation leaves the object-or-distractor comparison of a tracklet as it is when
-    the tracklet moves the trajectory little, which is the case for the short or
-    misfitting tracklets it is about.
-
-    What this leaves out is measurable. The map's objects pin the trajectory down, and a
-    tracklet's slices fit that trajectory better than the odometry alone: on the bundled
-    ``clutter`` bag its evidence rises by 50 to 90 nats for 40 to 80 slices. The object
-    side of the target gets that (it is in the joint graph), this side does not. A floor
-    patch's tracklet alone still prefers the distractor by 45 to 165 nats (a flat patch
-    fits a class only tens of prior stddevs off its height), but merged in one object
-    with the patch's other tracklets it is within about 50 nats, one of five such patches
-    even ahead by 27. The start state keeps the chain away from those objects
-    (:mod:`objslam_mapper.inference`, ``initial_clutter``); evaluating the distractor in
-    the map's trajectory (a distractor as a group of the association, solved in the joint
-    graph with these broad priors) would remove the bias from the target itself. Holding
-    the poses fixed at a reference trajectory instead overshoots: it gains 40 to 60 nats
-    more than the joint graph does on long tracklets and would turn real objects into
-    clutter.
+The mixture of the two components is approximated by its larger term, chosen once per
+tracklet (:meth:`ClutterModel.component`): the component whose ``log L`` is larger with
+the odometry alone. The choice is a fixed function of the tracklet, so the target stays a
+fixed function of the association; the max of a two-term mixture is within ``log 2`` of
+it. In practice a tracklet that fits a static thing at all is a distractor, and one that
+does not (slices of nothing consistent) independent false alarms.
 
 Missed detections are modelled on neither side (an object is detected with probability
 one wherever it was seen).
@@ -58,16 +52,16 @@ one wherever it was seen).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from objslam_mapper.backends import solve_with_backend
 from objslam_mapper.config import setting
-from objslam_mapper.problem import GraphProblem, gaussian_log_normalizer
+from objslam_mapper.problem import GraphProblem, with_extra_priors
 
 
 @dataclass(frozen=True)
@@ -115,35 +109,66 @@ class ClutterConfig:
         return slice_count * self.log_likelihood_per_slice
 
 
-def distractor_problem(problem: GraphProblem, config: ClutterConfig) -> GraphProblem:
-    """``problem`` with every class's z_base and size priors widened to the distractor's."""
-    stddev = np.array(problem.prior_stddev)
+INDEPENDENT = "independent"
+DISTRACTOR = "distractor"
+
+
+def distractor_priors(problem: GraphProblem, config: ClutterConfig) -> tuple[NDArray, NDArray]:
+    """Prior rows (L, 5) of a distractor of each class: the class's, with z_base and size widened."""
+    classes = len(problem.labels)
+    mean = np.array(problem.prior_mean[:classes])
+    stddev = np.array(problem.prior_stddev[:classes])
     stddev[:, 2] = config.distractor_z_base_stddev_m
     stddev[:, 3:] = config.distractor_size_stddev_m
-    stddev.flags.writeable = False
-    normalizer = gaussian_log_normalizer(stddev)
-    normalizer.flags.writeable = False
-    return dataclasses.replace(problem, prior_stddev=stddev, prior_log_normalizer=normalizer)
+    return mean, stddev
+
+
+@dataclass(frozen=True)
+class Component:
+    """The clutter component that explains one tracklet, and its terms of the target."""
+
+    kind: str  # INDEPENDENT or DISTRACTOR
+    # Added to log P(J|Z) when the tracklet is clutter: log(1 - w) + n log(rate / V) for
+    # independent false alarms, log w for a distractor (whose slices are in the graph).
+    log_weight: float
+    alone_log_likelihood: float  # log L with the odometry alone (the component choice)
 
 
 class ClutterModel:
-    """log L_clutter of tracklets of one problem (see the module docstring)."""
+    """The clutter side of the target for one problem (see the module docstring).
+
+    ``problem`` is the problem with the distractors' prior rows appended: solves of
+    associations with distractors must use it (it equals the input for classes).
+    """
 
     def __init__(self, problem: GraphProblem, config: ClutterConfig):
         self.config = config
-        self._distractors = distractor_problem(problem, config) if config.distractor_weight > 0.0 else None
+        self._first_row: int | None = None
+        if config.distractor_weight > 0.0:
+            problem, self._first_row = with_extra_priors(problem, *distractor_priors(problem, config))
+        self.problem = problem
+
+    def distractor_row(self, measurement: int) -> int:
+        """Prior row of a distractor of the class of ``measurement``."""
+        if self._first_row is None:
+            raise ValueError("the clutter model has no distractors (distractor_weight is 0)")
+        return self._first_row + int(self.problem.measurement_label[measurement])
 
     def distractor_log_evidence(self, measurement_indices: Sequence[int]) -> float:
-        if self._distractors is None:
+        """Laplace evidence of the slices as one distractor, with the odometry alone."""
+        if self._first_row is None:
             return -math.inf
-        return solve_with_backend(self._distractors, [np.asarray(measurement_indices, dtype=np.int64)]).log_evidence
+        members = np.asarray(measurement_indices, dtype=np.int64)
+        row = self.distractor_row(int(members[0]))
+        return solve_with_backend(self.problem, [members], priors=[row]).log_evidence
 
-    def tracklet_log_likelihood(self, measurement_indices: Sequence[int]) -> float:
+    def component(self, measurement_indices: Sequence[int]) -> Component:
+        """The component that explains a tracklet (the likelier one with the odometry alone)."""
         w = self.config.distractor_weight
         independent = self.config.log_likelihood(len(measurement_indices))
         if w == 0.0:
-            return independent
+            return Component(INDEPENDENT, independent, independent)
         distractor = self.distractor_log_evidence(measurement_indices)
-        if w == 1.0:
-            return distractor
-        return float(np.logaddexp(math.log1p(-w) + independent, math.log(w) + distractor))
+        if w == 1.0 or math.log(w) + distractor > math.log1p(-w) + independent:
+            return Component(DISTRACTOR, math.log(w), math.log(w) + distractor)
+        return Component(INDEPENDENT, math.log1p(-w) + independent, math.log1p(-w) + independent)

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_mapper.geometry import wrap_angle
+from objslam_mapper.outliers import WARM_START_CAP_SCALE, half_chi2, truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
 
@@ -50,16 +51,22 @@ class ObjectEvidence:
 class _ObjectSystem:
     """Whitened slice residuals and object prior of one group at fixed poses."""
 
-    def __init__(self, problem: GraphProblem, poses: NDArray[np.float64], group: NDArray[np.int64]):
-        label = int(problem.measurement_label[group[0]])
+    def __init__(
+        self, problem: GraphProblem, poses: NDArray[np.float64], group: NDArray[np.int64], prior: int | None = None
+    ):
+        row = int(problem.measurement_label[group[0]]) if prior is None else int(prior)
         self.poses = np.ascontiguousarray(poses[problem.measurement_pose[group]])
         self.z = np.ascontiguousarray(problem.measurements[group].T)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[group].T)
-        self.prior_mean = problem.prior_mean[label]
-        self.prior_inv_sigma = 1.0 / problem.prior_stddev[label]
+        self.outlier_cost = problem.measurement_outlier_cost[group]
+        self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
+        self.cap_scale = 1.0  # as AssociationSystem.cap_scale
+        self.outliers = 0  # slices beyond their true cap at the last linearization
+        self.prior_mean = problem.prior_mean[row]
+        self.prior_inv_sigma = 1.0 / problem.prior_stddev[row]
         self.mount = problem.mount
         self.log_normalizer = float(np.sum(problem.measurement_log_normalizer[group])) + float(
-            problem.prior_log_normalizer[label]
+            problem.prior_log_normalizer[row]
         )
 
     def linearize(self, state: NDArray[np.float64]) -> tuple[float, NDArray | None, NDArray | None]:
@@ -70,7 +77,12 @@ class _ObjectSystem:
         res = pred.values - self.z
         res[BEARING] = wrap_angle(res[BEARING])
         res *= self.inv_sigma
-        jac = pred.jacobian[:, _OBJECT_COLUMNS] * self.inv_sigma[:, None, :]  # (4, 5, A)
+        half = half_chi2(res)
+        self.outliers = int(np.count_nonzero(half > self.outlier_cost))
+        weight = self.inv_sigma
+        if self.has_outlier_model and self.cap_scale < np.inf:
+            weight = weight * truncate(res, self.outlier_cost * self.cap_scale, half)
+        jac = pred.jacobian[:, _OBJECT_COLUMNS] * weight[:, None, :]  # (4, 5, A)
         prior = (state - self.prior_mean) * self.prior_inv_sigma
         cost = 0.5 * float(np.sum(res * res) + prior @ prior)
         flat = jac.transpose(1, 0, 2).reshape(OBJECT_DIM, -1)
@@ -78,6 +90,17 @@ class _ObjectSystem:
         info[np.diag_indices(OBJECT_DIM)] += self.prior_inv_sigma**2
         grad = flat @ res.ravel() + prior * self.prior_inv_sigma
         return cost, grad, info
+
+
+def object_information(
+    problem: GraphProblem,
+    poses: NDArray[np.float64],
+    group: NDArray[np.int64],
+    state: NDArray[np.float64],
+    prior: int | None = None,
+) -> NDArray[np.float64] | None:
+    """(5, 5) information of one object at ``state`` with the poses fixed (None where undefined)."""
+    return _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64), prior).linearize(state)[2]
 
 
 def object_evidence(
@@ -89,18 +112,42 @@ def object_evidence(
     max_iterations: int = 20,
     relative_tolerance: float = 1e-6,
     absolute_tolerance: float = 1e-6,
+    prior: int | None = None,
 ) -> ObjectEvidence:
     """Levenberg-Marquardt on one object at fixed ``poses``, then its Laplace evidence.
+
+    ``prior`` is the object's prior row (default: its class's), as ``solver.solve``'s ``priors``.
 
     ``start`` (5,) is the starting object; an unusable start (a pose inside it) or a
     solve that never becomes valid gives ``-inf``. An unconverged solve reports the
     evidence at its last iterate, as :func:`objslam_mapper.solver.solve` does.
     """
-    system = _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64))
+    system = _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64), prior)
+    # As solver.solve from a warm start: the poses are a MAP's, the start near the object.
+    system.cap_scale = WARM_START_CAP_SCALE
     state = np.array(start, dtype=float)
-    cost, grad, info = system.linearize(state)
-    if grad is None:
+    if system.linearize(state)[1] is None:
         return ObjectEvidence(-math.inf, state, 0, False)
+    tolerances = (absolute_tolerance, relative_tolerance)
+    state, cost, _, info, iterations, converged = _minimize(system, state, max_iterations, tolerances)
+    system.linearize(state)  # counts the slices beyond their true cap where the first phase ended
+    if system.has_outlier_model and system.outliers:
+        system.cap_scale = 1.0
+        state, cost, _, info, more, converged = _minimize(system, state, max_iterations, tolerances)
+        iterations += more
+    sign, log_det = np.linalg.slogdet(info)
+    if sign <= 0.0:
+        return ObjectEvidence(-math.inf, state, iterations, False)
+    log_evidence = -cost + system.log_normalizer + 0.5 * OBJECT_DIM * LOG_2PI - 0.5 * float(log_det)
+    return ObjectEvidence(float(log_evidence), state, iterations, converged)
+
+
+def _minimize(
+    system: _ObjectSystem, state: NDArray[np.float64], max_iterations: int, tolerances: tuple[float, float]
+) -> tuple[NDArray[np.float64], float, NDArray, NDArray, int, bool]:
+    """Levenberg-Marquardt from a valid ``state``: (state, cost, gradient, information, linearizations, converged)."""
+    absolute_tolerance, relative_tolerance = tolerances
+    cost, grad, info = system.linearize(state)
     damping, iterations, converged = 0.0, 1, False
     while iterations < max_iterations:
         damped = info + damping * np.diag(np.diag(info))
@@ -125,8 +172,4 @@ def object_evidence(
             damping = max(1e-4, 10.0 * damping)
             if damping > _MAX_LAMBDA:
                 break
-    sign, log_det = np.linalg.slogdet(info)
-    if sign <= 0.0:
-        return ObjectEvidence(-math.inf, state, iterations, False)
-    log_evidence = -cost + system.log_normalizer + 0.5 * OBJECT_DIM * LOG_2PI - 0.5 * float(log_det)
-    return ObjectEvidence(float(log_evidence), state, iterations, converged)
+    return state, cost, grad, info, iterations, converged

@@ -100,6 +100,9 @@ class SliceNoiseConfig:
     Defaults suit a colour-blob detector on the bundled 640x640 image, where one pixel
     near the horizon spans about 0.3 deg: the bearing averages two blob edges, the width
     and the elevations each depend on one or two edges and on the blob's shading.
+
+    A slice is Gaussian around the prediction with probability ``1 - outlier_probability``
+    and otherwise uniform over the measurement space (:mod:`objslam_mapper.outliers`).
     """
 
     bearing_stddev_rad: float = setting(0.006, "bearing (slice centre azimuth) stddev (rad)", minimum=1e-9)
@@ -121,6 +124,21 @@ class SliceNoiseConfig:
     )
     low_confidence_stddev_scale: float = setting(
         4.0, "the noise stddevs of such slices are multiplied by this", minimum=1.0
+    )
+    outlier_probability: float = setting(
+        0.01,
+        "share of the slices assigned to an object that are no measurement of it (a blob merged with a "
+        "same-colour neighbour or poster, cut by an occluder): uniform over the measurement space instead "
+        "of Gaussian (0: every slice Gaussian)",
+        minimum=0.0,
+        maximum=0.5,
+    )
+    outlier_volume_rad4: float = setting(
+        22.746,
+        "volume of the slice measurement space an outlier is uniform over (rad^4; default: any bearing, "
+        "widths up to 1 rad, ordered edge elevations from -90 deg to the bundled camera's 64 deg: "
+        "2 pi * 1 * (pi/2 + 1.12)^2 / 2)",
+        minimum=1e-12,
     )
 
 

@@ -22,7 +22,9 @@ Graph (:func:`build_gtsam_graph`)
     - the class priors as ``PriorFactorVector`` with diagonal sigmas (built-in, C++);
     - the slice factors (:mod:`slice_model`), with its analytic Jacobians composed with the
       Pose2 chart: a GTSAM tangent vector ``v`` of a pose moves it by
-      ``(R(theta) v_xy, v_theta)`` in map coordinates at ``v = 0``.
+      ``(R(theta) v_xy, v_theta)`` in map coordinates at ``v = 0``; an outlier slice
+      (:mod:`objslam_mapper.outliers`) returns its residual scaled to the capped cost and
+      zero Jacobians, so GTSAM sees the same truncated cost and information.
 
     Two granularities. ``per_detection=True`` is the naive graph: one ``CustomFactor`` per
     detection and per odometry increment (thousands of Python calls per linearization).
@@ -61,7 +63,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
-from objslam_mapper.normal_equations import Layout, layout_of
+from objslam_mapper.normal_equations import (
+    Layout,
+    count_outliers,
+    first_phase_cap_scale,
+    graph_log_normalizer,
+    layout_of,
+)
+from objslam_mapper.outliers import truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
 from objslam_mapper.solver import GraphSolution, initial_calibration, initial_state, make_solution
@@ -178,12 +187,18 @@ def _set_pose_jacobians(jacobians: list, n_keys: int, *blocks: tuple[NDArray[np.
 # -- factors ------------------------------------------------------------------------------------
 
 
-def _slice_factor(problem: GraphProblem, measurements: NDArray[np.int64], object_key: int) -> gtsam.CustomFactor:
-    """One CustomFactor over ``measurements`` of one object: residual rows 4m..4m+3 per measurement m."""
+def _slice_factor(
+    problem: GraphProblem, measurements: NDArray[np.int64], object_key: int, cap_scale: float = 1.0
+) -> gtsam.CustomFactor:
+    """One CustomFactor over ``measurements`` of one object: residual rows 4m..4m+3 per measurement m.
+
+    ``cap_scale`` multiplies the outlier caps (inf: every slice Gaussian; objslam_mapper.outliers)."""
     pose_index, local = np.unique(problem.measurement_pose[measurements], return_inverse=True)
     pose_keys = [GtsamKeys.pose(i) for i in pose_index]
     z = np.ascontiguousarray(problem.measurements[measurements].T)  # (4, A)
     inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[measurements].T)
+    cap = problem.measurement_outlier_cost[measurements] * cap_scale
+    capped = bool(np.isfinite(cap).any())
     mount = problem.mount
     n_keys = len(pose_keys)
 
@@ -194,9 +209,10 @@ def _slice_factor(problem: GraphProblem, measurements: NDArray[np.int64], object
         err = pred.values - z
         err[BEARING] = wrap_angle(err[BEARING])
         err *= inv_sigma
+        weight = inv_sigma * truncate(err, cap) if capped else inv_sigma  # capped slices carry no information
         err[:, ~pred.valid] = _INVALID_RESIDUAL
         if jacobians is not None:
-            jac = pred.jacobian * inv_sigma[:, None, :]  # (4, 6, A)
+            jac = pred.jacobian * weight[:, None, :]  # (4, 6, A)
             pose_block = _chart(jac[:, :3] * _POSE_SIGN[None, :, None], at[:, 2])
             _set_pose_jacobians(jacobians, n_keys, (pose_block.transpose(2, 0, 1), local))
             jacobians[n_keys] = jac[:, _OBJECT_COLUMNS].transpose(2, 0, 1).reshape(-1, OBJECT_DIM)
@@ -282,18 +298,21 @@ def build_gtsam_graph(
     *,
     per_detection: bool = False,
     window_poses: int | None = DEFAULT_WINDOW_POSES,
+    priors: ArrayLike | None = None,
+    cap_scale: float = 1.0,
 ) -> tuple[gtsam.NonlinearFactorGraph, GtsamKeys]:
     """The factor graph of the association ``groups`` (module docstring) and its keys.
 
-    ``groups[j]`` lists the measurement indices of object j (checked as by ``solver.solve``).
-    ``window_poses`` only matters with ``per_detection=False``: None makes one slice factor
-    per group and one odometry factor for the whole trajectory.
+    ``groups[j]`` lists the measurement indices of object j (checked as by ``solver.solve``),
+    ``priors[j]`` its prior row (as ``solver.solve``'s). ``window_poses`` only matters with
+    ``per_detection=False``: None makes one slice factor per group and one odometry factor
+    for the whole trajectory. ``cap_scale`` multiplies the slices' outlier caps (inf: none).
     """
-    return _build(problem, layout_of(problem, groups), per_detection, window_poses)
+    return _build(problem, layout_of(problem, groups, priors), per_detection, window_poses, cap_scale)
 
 
 def _build(
-    problem: GraphProblem, layout: Layout, per_detection: bool, window_poses: int | None
+    problem: GraphProblem, layout: Layout, per_detection: bool, window_poses: int | None, cap_scale: float = 1.0
 ) -> tuple[gtsam.NonlinearFactorGraph, GtsamKeys]:
     keys = GtsamKeys(problem.pose_count, layout.n_objects, problem.calibration_dim)
     window = _window_size(problem.pose_count, window_poses, per_detection)
@@ -302,9 +321,9 @@ def _build(
     for first in range(0, problem.pose_count - 1, window):
         graph.add(_odometry_factor(problem, first, min(first + window, problem.pose_count - 1)))
     for j, group in enumerate(layout.groups):
-        label = int(layout.labels[j])
-        sigmas = gtsam.noiseModel.Diagonal.Sigmas(problem.prior_stddev[label])
-        graph.add(gtsam.PriorFactorVector(keys.object(j), np.array(problem.prior_mean[label]), sigmas))
+        row = int(layout.priors[j])
+        sigmas = gtsam.noiseModel.Diagonal.Sigmas(problem.prior_stddev[row])
+        graph.add(gtsam.PriorFactorVector(keys.object(j), np.array(problem.prior_mean[row]), sigmas))
         if per_detection:
             chunks = np.split(group, np.arange(1, len(group)))
         else:
@@ -312,7 +331,7 @@ def _build(
             order = np.argsort(cell, kind="stable")
             chunks = np.split(group[order], np.flatnonzero(np.diff(cell[order])) + 1)
         for chunk in chunks:
-            graph.add(_slice_factor(problem, chunk, keys.object(j)))
+            graph.add(_slice_factor(problem, chunk, keys.object(j), cap_scale))
     if problem.calibration_dim:
         sigmas = gtsam.noiseModel.Diagonal.Sigmas(np.array(problem.calibration_prior_stddev))
         graph.add(gtsam.PriorFactorVector(keys.calibration(), np.zeros(problem.calibration_dim), sigmas))
@@ -460,6 +479,7 @@ def solve_gtsam(
     per_detection: bool = False,
     drive: Drive = "python",
     window_poses: int | None = DEFAULT_WINDOW_POSES,
+    priors: ArrayLike | None = None,
 ) -> GraphSolution:
     """MAP, Laplace evidence and (optionally) object marginals of ``groups``, solved by GTSAM.
 
@@ -470,7 +490,7 @@ def solve_gtsam(
     """
     if drive not in DRIVES:
         raise GtsamBackendError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
-    layout = layout_of(problem, groups)
+    layout = layout_of(problem, groups, priors)
     poses, objects = initial_state(problem, layout, warm_start)
     calib = initial_calibration(problem, warm_start)
     valid = predict_reduced(
@@ -484,15 +504,24 @@ def solve_gtsam(
         logger.debug("GTSAM solve cannot start: a pose lies inside an object's starting cylinder")
         return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
 
-    graph, keys = _build(problem, layout, per_detection, window_poses)
     cfg = problem.solver
     limit = cfg.max_iterations if max_iterations is None else max_iterations
-    linearize = _Linearizer(graph, keys)
-    initial = keys.to_values(poses, objects, calib)
-    if drive == "python":
-        driven = _drive_python(linearize, initial, cfg, limit)
-    else:
-        driven = _drive_optimizer(graph, linearize, initial, cfg, limit)
+    keys = GtsamKeys(problem.pose_count, layout.n_objects, problem.calibration_dim)
+    values = keys.to_values(poses, objects, calib)
+    # As the fast solver: raised caps (none from a cold start), then the true ones if a
+    # slice is beyond its true cap (elsewhere the two costs agree).
+    iterations = 0
+    for cap_scale in (first_phase_cap_scale(problem, layout, poses, objects, warm_start is not None), 1.0):
+        if cap_scale == 1.0 and iterations and not count_outliers(problem, layout, *keys.from_values(values)):
+            break
+        graph, keys = _build(problem, layout, per_detection, window_poses, cap_scale)
+        linearize = _Linearizer(graph, keys)
+        if drive == "python":
+            driven = _drive_python(linearize, values, cfg, limit)
+        else:
+            driven = _drive_optimizer(graph, linearize, values, cfg, limit)
+        values = driven.values
+        iterations += driven.iterations
 
     final = driven.linear
     bayes_tree = driven.bayes_tree or linearize.eliminate(final.graph)
@@ -501,15 +530,10 @@ def solve_gtsam(
         predicted = final.cost - float(final.graph.error(bayes_tree.optimize()))
         converged = predicted <= cfg.absolute_tolerance + cfg.relative_tolerance * final.cost
     if not converged:
-        logger.debug("GTSAM solve stopped after %d linearizations without converging", driven.iterations)
+        logger.debug("GTSAM solve stopped after %d linearizations without converging", iterations)
     log_det = 2.0 * float(bayes_tree.logDeterminant())
     dimension = POSE_DIM * problem.pose_count + OBJECT_DIM * layout.n_objects + problem.calibration_dim
-    log_normalizer = (
-        problem.trajectory_log_normalizer
-        + float(np.sum(problem.measurement_log_normalizer[layout.measurements]))
-        + float(np.sum(problem.prior_log_normalizer[layout.labels]))
-    )
-    log_evidence = -final.cost + log_normalizer + 0.5 * dimension * LOG_2PI - 0.5 * log_det
+    log_evidence = -final.cost + graph_log_normalizer(problem, layout) + 0.5 * dimension * LOG_2PI - 0.5 * log_det
     covariance = calib_cov = None
     if with_covariances:
         marginals = gtsam.Marginals(final.graph, driven.values)
@@ -523,7 +547,7 @@ def solve_gtsam(
         layout,
         poses,
         objects,
-        driven.iterations,
+        iterations,
         converged,
         log_evidence,
         2.0 * final.cost,

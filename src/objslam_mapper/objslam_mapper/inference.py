@@ -57,12 +57,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_mapper.association import Association
+from objslam_mapper.association import CLUTTER, Association
 from objslam_mapper.backends import solve_with_backend
 from objslam_mapper.catalog import Catalog
-from objslam_mapper.clutter import ClutterConfig, ClutterModel
+from objslam_mapper.clutter import DISTRACTOR, ClutterConfig, ClutterModel, Component
 from objslam_mapper.conditional_evidence import object_evidence
 from objslam_mapper.config import setting
+from objslam_mapper.exclusion import no_overlap_log_probability
 from objslam_mapper.graph_config import GraphConfig
 from objslam_mapper.initialization import initial_object
 from objslam_mapper.map_file import BuiltMap
@@ -106,8 +107,18 @@ class SamplerConfig:
     report_min_fraction: float = setting(
         0.05, "other identities held by at least this fraction of samples are reported as rejected", minimum=0.0
     )
+    identity_overlap: float = setting(
+        0.8,
+        "two sample objects are one identity when each holds at least this share of the other's measurements "
+        "(1: the paper's exact identity)",
+        minimum=0.501,
+        maximum=1.0,
+    )
     initial_merge_distance_m: float = setting(
         0.6, "start state: a tracklet joins the nearest same-class object within this distance (m)", minimum=0.0
+    )
+    exclusion: bool = setting(
+        True, "objects are solid: an association pays the posterior probability that two of its objects overlap"
     )
     initial_clutter: bool = setting(
         True, "start state: a tracklet the target prefers as clutter over a lone object starts in clutter"
@@ -135,6 +146,11 @@ class SamplerConfig:
             raise ValueError(f"burn_in ({self.burn_in}) must be smaller than samples ({self.samples})")
 
 
+# A group of an association's factor graph: an object (its tracklets) or a distractor (one clutter tracklet).
+GraphGroup = tuple[str, tuple[int, ...]]
+_OBJECT = "object"
+
+
 class AssociationTarget:
     """``log P(J|Z)`` of associations of ``tracklets`` (see the module docstring); callable."""
 
@@ -147,20 +163,22 @@ class AssociationTarget:
         max_iterations: int | None = None,
         cache_size: int = 256,
         screen_iterations: int = 20,
+        exclusion: bool = True,
     ):
-        self.problem = problem
-        self.tracklets = list(tracklets)
         self.clutter = ClutterModel(problem, clutter)
+        self.exclusion = exclusion
+        self.problem = self.clutter.problem  # with the distractors' prior rows
+        self.tracklets = list(tracklets)
         self.max_iterations = max_iterations
         self.cache_size = cache_size
         self.screen_iterations = screen_iterations
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
         self._anchor: GraphSolution | None = None
-        self._clutter_log_likelihood: dict[int, float] = {}
-        # Per state: the poses and objects its screens are conditioned on (its MAP when first solved).
+        self._components: dict[int, Component] = {}
+        # Per state: the poses and groups its screens are conditioned on (its MAP when first solved).
         self._references: OrderedDict[Association, tuple[NDArray, NDArray, NDArray]] = OrderedDict()
-        self._object_evidence: OrderedDict[tuple[Association, tuple[int, ...]], float] = OrderedDict()
+        self._group_evidence: OrderedDict[tuple[Association, GraphGroup], tuple[float, NDArray]] = OrderedDict()
         self.solves = 0
         self.solve_seconds = 0.0
         self.screens = 0
@@ -171,31 +189,58 @@ class AssociationTarget:
         self.clutter_seconds = 0.0
         self.clutter_solves = 0  # one distractor solve per tracklet, ever: it does not depend on J
 
-    def groups(self, state: Association) -> list[NDArray[np.int64]]:
-        """Measurement indices of each object of ``state``, in its object order."""
-        return [np.sort(np.concatenate([self._members[t] for t in group])) for group in state.groups]
-
-    def tracklet_clutter_log_likelihood(self, t: int) -> float:
-        """log L_clutter of tracklet t (one distractor solve, remembered)."""
-        if t not in self._clutter_log_likelihood:
+    # ---- the graph of an association -----------------------------------------------------
+    def component(self, t: int) -> Component:
+        """How tracklet t is explained when it is clutter (one distractor solve, remembered)."""
+        if t not in self._components:
             start = time.perf_counter()
-            self._clutter_log_likelihood[t] = self.clutter.tracklet_log_likelihood(self._members[t])
+            self._components[t] = self.clutter.component(self._members[t])
             self.clutter_solves += 1
             self.clutter_seconds += time.perf_counter() - start
-        return self._clutter_log_likelihood[t]
+        return self._components[t]
+
+    def graph_groups(self, state: Association) -> list[GraphGroup]:
+        """The groups of ``state``'s factor graph: its objects in order, then its distractors."""
+        groups: list[GraphGroup] = [(_OBJECT, g) for g in state.groups]
+        groups += [(DISTRACTOR, (t,)) for t in state.clutter if self.component(t).kind == DISTRACTOR]
+        return groups
+
+    def _measurements(self, group: GraphGroup) -> NDArray[np.int64]:
+        return np.sort(np.concatenate([self._members[t] for t in group[1]]))
+
+    def _prior_row(self, group: GraphGroup, members: NDArray[np.int64]) -> int:
+        if group[0] == DISTRACTOR:
+            return self.clutter.distractor_row(int(members[0]))
+        return int(self.problem.measurement_label[members[0]])
+
+    def groups(self, state: Association) -> list[NDArray[np.int64]]:
+        """Measurement indices of each object of ``state``, in its object order."""
+        return [self._measurements((_OBJECT, g)) for g in state.groups]
+
+    def _graph(self, state: Association) -> tuple[list[NDArray[np.int64]], list[int]]:
+        """Measurements and prior rows of every group of ``state``'s graph."""
+        members = [self._measurements(g) for g in self.graph_groups(state)]
+        rows = [self._prior_row(g, m) for g, m in zip(self.graph_groups(state), members, strict=True)]
+        return members, rows
+
+    def tracklet_clutter_log_likelihood(self, t: int) -> float:
+        """log L_clutter of tracklet t with the odometry alone (its component's)."""
+        return self.component(t).alone_log_likelihood
 
     def prefers_clutter(self, t: int) -> bool:
         """Whether tracklet t alone, with the odometry, is likelier clutter than an object of its class.
 
         That is ``log P(J|Z)`` of the state with t its own object and every other tracklet
-        clutter against the state with all of them clutter: both sides in the same context
-        (the odometry alone), so neither gets the trajectory the rest of the map would give.
+        clutter against the state with all of them clutter, both with the odometry alone
+        (the other tracklets' terms cancel), so neither gets the trajectory the rest of the
+        map would give.
         """
         alone = solve_with_backend(self.problem, [self._members[t]]).log_evidence
         return bool(self.tracklet_clutter_log_likelihood(t) > alone)
 
     def clutter_log_likelihood(self, state: Association) -> float:
-        return sum(self.tracklet_clutter_log_likelihood(t) for t in state.clutter)
+        """The clutter terms of ``log P(J|Z)`` outside the graph (module docstring of clutter)."""
+        return sum(self.component(t).log_weight for t in state.clutter)
 
     def solution(self, state: Association) -> GraphSolution:
         cached = self._solutions.get(state)
@@ -204,8 +249,9 @@ class AssociationTarget:
             return cached
         start = time.perf_counter()
         max_iterations = None if self._anchor is None else self.max_iterations
+        members, rows = self._graph(state)
         result = solve_with_backend(
-            self.problem, self.groups(state), warm_start=self._anchor, max_iterations=max_iterations
+            self.problem, members, warm_start=self._anchor, max_iterations=max_iterations, priors=rows
         )
         self.solve_seconds += time.perf_counter() - start
         self.solves += 1
@@ -215,18 +261,29 @@ class AssociationTarget:
         return result
 
     def __call__(self, state: Association) -> float:
-        if state.n_objects == 0:
+        if not self.graph_groups(state):
             return NO_OBJECT_LOG_EVIDENCE + self.clutter_log_likelihood(state)
-        return self.solution(state).log_evidence + self.clutter_log_likelihood(state)
+        solution = self.solution(state)
+        value = solution.log_evidence + self.clutter_log_likelihood(state)
+        if self.exclusion and state.n_objects > 1 and np.isfinite(value):
+            value += self.no_overlap_log_probability(state, solution)
+        return value
+
+    def no_overlap_log_probability(self, state: Association, solution: GraphSolution) -> float:
+        """log P(no two objects of ``state`` overlap) at its MAP (objslam_mapper.exclusion)."""
+        members, rows = self._graph(state)
+        k = state.n_objects
+        objects = np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects[:k]])
+        return no_overlap_log_probability(self.problem, solution.map_T_base, objects, members[:k], rows[:k])
 
     # ---- the screen (first stage of delayed acceptance) --------------------------------
     def _reference(self, state: Association) -> tuple[NDArray, NDArray, NDArray]:
-        """(poses (N, 3), owner object of each measurement (M,), objects (K, 5)) of ``state``'s MAP."""
+        """(poses (N, 3), graph group of each measurement (M,), groups (G, 5)) of ``state``'s MAP."""
         cached = self._references.get(state)
         if cached is not None:
             self._references.move_to_end(state)
             return cached
-        if state.n_objects == 0:
+        if not self.graph_groups(state):
             owners = np.full(self.problem.measurement_count, -1, dtype=np.int64)
             reference = (np.asarray(self.problem.odometry_poses), owners, np.zeros((0, 5)))
         else:
@@ -238,47 +295,70 @@ class AssociationTarget:
             self._references.popitem(last=False)
         return reference
 
-    def _conditional_log_evidence(self, state: Association, group: tuple[int, ...]) -> float:
-        """log e(group) with the poses fixed at ``state``'s MAP (conditional_evidence)."""
+    def _conditional(self, state: Association, group: GraphGroup) -> tuple[float, NDArray[np.float64]]:
+        """(log e(group), its object) with the poses fixed at ``state``'s MAP (conditional_evidence)."""
         key = (state, group)
-        cached = self._object_evidence.get(key)
+        cached = self._group_evidence.get(key)
         if cached is not None:
             return cached
         poses, owners, objects = self._reference(state)
-        members = np.sort(np.concatenate([self._members[t] for t in group]))
+        members = self._measurements(group)
+        row = self._prior_row(group, members)
         owned = owners[members]
         owned = owned[owned >= 0]
         starts = [objects[int(np.argmax(np.bincount(owned)))]] if len(owned) else []
         starts.append(None)
-        value = -np.inf
+        result = (-np.inf, np.zeros(5))
         for start in starts:
             if start is None:
                 start = initial_object(self.problem, members, poses)
             self.object_solves += 1
             started = time.perf_counter()
-            value = object_evidence(self.problem, poses, members, start, max_iterations=self.screen_iterations)
+            evidence = object_evidence(
+                self.problem, poses, members, start, max_iterations=self.screen_iterations, prior=row
+            )
             self.screen_seconds += time.perf_counter() - started
-            value = value.log_evidence
-            if np.isfinite(value):
+            result = (evidence.log_evidence, evidence.object_state)
+            if np.isfinite(evidence.log_evidence):
                 break
-        self._object_evidence[key] = value
-        if len(self._object_evidence) > _OBJECT_EVIDENCE_CACHE_SIZE:
-            self._object_evidence.popitem(last=False)
-        return value
+        self._group_evidence[key] = result
+        if len(self._group_evidence) > _OBJECT_EVIDENCE_CACHE_SIZE:
+            self._group_evidence.popitem(last=False)
+        return result
+
+    def _screen_no_overlap(self, state: Association, new: Association) -> float:
+        """Change of the no-overlap term from ``state`` to ``new``, objects at the screen's
+        fixed-pose estimates (the reference's where ``new`` keeps an object)."""
+        poses, _, objects = self._reference(state)
+        kept = {g: objects[k] for k, g in enumerate(state.groups)}
+
+        def term(assoc: Association) -> float:
+            if assoc.n_objects < 2:
+                return 0.0
+            groups = [(_OBJECT, g) for g in assoc.groups]
+            states = np.array([kept[g[1]] if g[1] in kept else self._conditional(state, g)[1] for g in groups])
+            members = [self._measurements(g) for g in groups]
+            rows = [self._prior_row(g, m) for g, m in zip(groups, members, strict=True)]
+            return no_overlap_log_probability(self.problem, poses, states, members, rows)
+
+        return term(new) - term(state)
 
     def screen(self, state: Association, new: Association) -> float:
         """Approximate ``log P(new|Z) - log P(state|Z)``: poses fixed at ``state``'s MAP.
 
-        The objects both associations share cancel, so only those the move changes are
-        solved (5 variables each); the clutter terms are the exact ones of the target.
-        A fixed function of the pair (cached), as delayed acceptance needs.
+        The graph groups (objects and distractors) both associations share cancel, so only
+        those the move changes are solved (5 variables each); the clutter terms outside
+        the graph are the exact ones of the target, the no-overlap term is evaluated at the
+        fixed-pose objects. A fixed function of the pair (cached), as delayed acceptance needs.
         """
         self.screens += 1
-        old_groups, new_groups = set(state.groups), set(new.groups)
-        gained = sum(self._conditional_log_evidence(state, g) for g in new_groups - old_groups)
-        lost = sum(self._conditional_log_evidence(state, g) for g in old_groups - new_groups)
+        old_groups, new_groups = set(self.graph_groups(state)), set(self.graph_groups(new))
+        gained = sum(self._conditional(state, g)[0] for g in new_groups - old_groups)
+        lost = sum(self._conditional(state, g)[0] for g in old_groups - new_groups)
         value = gained - lost if np.isfinite(lost) else -np.inf
         value += self.clutter_log_likelihood(new) - self.clutter_log_likelihood(state)
+        if self.exclusion and np.isfinite(value):
+            value += self._screen_no_overlap(state, new)
         return float(value)
 
     def move_to(self, state: Association) -> None:
@@ -286,16 +366,17 @@ class AssociationTarget:
         self._anchor = self._solutions.get(state, self._anchor)
 
     def summary(self, state: Association) -> SampleSummary:
-        """MAP and marginals of ``state`` (Algorithm 1, step 2a)."""
-        if state.n_objects == 0:
+        """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects."""
+        if not self.graph_groups(state):
             return SampleSummary(map_T_base=np.array(self.problem.odometry_poses), objects=())
         warm = self._solutions.get(state, self._anchor)
         started = time.perf_counter()
-        result = solve_with_backend(self.problem, self.groups(state), warm_start=warm, with_covariances=True)
+        members, rows = self._graph(state)
+        result = solve_with_backend(self.problem, members, warm_start=warm, with_covariances=True, priors=rows)
         self.marginal_seconds += time.perf_counter() - started
         self.marginal_solves += 1
         objects = []
-        for est in result.objects:
+        for est in result.objects[: state.n_objects]:
             nan3, nan2 = np.full((3, 3), np.nan), np.full((2, 2), np.nan)
             objects.append(
                 SampleObject(
@@ -350,6 +431,31 @@ def initial_association(
     return Association.from_groups(len(tracklets), members)
 
 
+def clear_start_objects(target: AssociationTarget, state: Association) -> tuple[Association, list[int]]:
+    """Move to clutter, one at a time, each start object whose tracklets the target prefers there.
+
+    A distractor seen in several tracklets (a patch on the floor, passed twice) starts as
+    one object when its tracklets lie close together. Each of them alone may fit its class
+    well enough (a short look leaves the size to the prior), while together they pin a
+    shape far off it; taking such an object apart one tracklet at a time first loses, so a
+    chain started there stays. This greedy pass, largest objects last, only moves the
+    start: the target and the chain's exactness do not change. Returns the new start and
+    the tracklets moved.
+    """
+    moved: list[int] = []
+    current = target(state)
+    target.move_to(state)  # the candidates differ from it by one object: warm starts
+    for group in sorted(state.groups, key=lambda g: (sum(len(target.tracklets[t]) for t in g), g)):
+        assignment = [CLUTTER if t in group else a for t, a in enumerate(state.assignment)]
+        candidate = Association.of(assignment)
+        value = target(candidate)
+        if value > current:
+            state, current = candidate, value
+            target.move_to(state)
+            moved.extend(group)
+    return state, sorted(moved)
+
+
 def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgress | None = None) -> BuiltMap:
     """Tracklets, MH over associations and Algorithm 1 on a built factor-graph problem."""
     report = progress or (lambda _phase, _done, _total: None)
@@ -373,6 +479,7 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         config.clutter,
         max_iterations=config.proposal_max_iterations,
         cache_size=config.solution_cache_size,
+        exclusion=config.exclusion,
     )
     if not chained.tracklets:
         logger.warning("no tracklets (every detection isolated): the map holds no objects")
@@ -397,6 +504,10 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
     if config.initial_clutter and config.clutter.enabled:
         start_clutter = {t for t in range(len(chained.tracklets)) if target.prefers_clutter(t)}
     start = initial_association(chained.tracklets, config.initial_merge_distance_m, start_clutter)
+    diagnostics["start_objects"] = start.n_objects
+    cleared: list[int] = []
+    if config.initial_clutter and config.clutter.enabled:
+        start, cleared = clear_start_objects(target, start)
     chain = sampler.run(
         start,
         config.samples,
@@ -415,8 +526,8 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         report("mapping", len(chain.counts), len(chain.counts))
 
     diagnostics.update(chain.diagnostics())
-    diagnostics["start_objects"] = start.n_objects
     diagnostics["start_clutter_tracklets"] = len(start_clutter)
+    diagnostics["start_tracklets_cleared"] = len(cleared)
     diagnostics["best_state_objects"] = chain.best_state.n_objects
     diagnostics["best_state_clutter_tracklets"] = len(chain.best_state.clutter)
     diagnostics["solves"] = target.solves
@@ -429,6 +540,7 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         spurious_location_stddev_m=config.spurious_location_stddev_m,
         existence_threshold=config.existence_threshold,
         report_min_fraction=config.report_min_fraction,
+        identity_overlap=config.identity_overlap,
         diagnostics=diagnostics,
     )
     total = time.perf_counter() - started

@@ -3,7 +3,17 @@ r"""Building the object map from association samples (paper Algorithm 1, eqs. 16
 Each kept sample J_n comes with its MAP estimate and marginals (one factor-graph solve),
 summarized as a :class:`SampleSummary`. An object's identity ``ID`` is the set of global
 measurement indices it owns, so the same physical hypothesis is recognized across samples
-whatever its object number. Then
+whatever its object number.
+
+Beyond the paper, identities are recognized up to a minority of their measurements
+(``identity_overlap``, 0.8 by default; 1 is the paper's exact identity): two sample objects
+are the same identity when each holds at least that share of the other's measurements.
+The chain is rightly unsure about a short tracklet beside an object (a blob merged with a
+neighbour for a few frames: the object's, clutter, or outliers), and with exact identities
+that doubt splits one well-determined object into variants that differ by those few
+slices, none of them above 1/2. Exact identities are grouped greedily, the most frequent
+first, each joining the first group whose most frequent identity it overlaps so; as the
+share is above 1/2, two objects of one sample (disjoint) never join one group. Then
 
 - an object of a sample is *spurious* (paper section 3.2) when its location is poorly
   determined: the largest standard deviation of its horizontal location marginal,
@@ -12,8 +22,8 @@ whatever its object number. Then
   covariance; a covariance's singular values are variances (m^2), so a threshold in cm
   must mean the standard deviation along the principal axis. Only x, y are used: z_base
   is pinned by the class prior for floor objects and would never decide;
-- a sample *yields* ``ID`` when it holds a non-spurious object owning exactly ``ID``;
-  ``P(ID|Z)`` is the fraction of samples yielding it (eq. 24);
+- a sample *yields* ``ID`` when it holds a non-spurious object owning ``ID`` (up to the
+  overlap above); ``P(ID|Z)`` is the fraction of samples yielding it (eq. 24);
 - the map holds the identities with ``P(ID|Z) > existence_threshold`` (1/2), the rest seen
   often enough are reported as rejected;
 - an identity's location and size are averages over the samples yielding it (eqs. 19-20),
@@ -89,6 +99,19 @@ class _Identity:
     weight: dict[bool, float] = field(default_factory=lambda: {True: 0.0, False: 0.0})  # key: yielded
     sums: dict[bool, list[NDArray[np.float64]]] = field(default_factory=dict)
 
+    @property
+    def held(self) -> float:
+        return self.weight[True] + self.weight[False]
+
+    def absorb(self, other: _Identity) -> None:
+        for yielded, terms in other.sums.items():
+            if yielded in self.sums:
+                for acc, term in zip(self.sums[yielded], terms, strict=True):
+                    acc += term
+            else:
+                self.sums[yielded] = [t.copy() for t in terms]
+            self.weight[yielded] += other.weight[yielded]
+
     def add(self, obj: SampleObject, count: float, yielded: bool) -> None:
         vec = np.concatenate([obj.location_m, obj.size_m])
         cov = np.zeros((5, 5))
@@ -108,6 +131,27 @@ class _Identity:
         mean_vec, second, mean_cov = (s / w for s in self.sums[key])
         spread = second - np.outer(mean_vec, mean_vec)
         return mean_vec, mean_cov + 0.5 * (spread + spread.T)
+
+
+def _group_identities(
+    identities: dict[frozenset[int], _Identity], overlap: float
+) -> list[tuple[frozenset[int], _Identity]]:
+    """Exact identities grouped up to ``overlap`` (module docstring): (most frequent member, merged sums)."""
+    groups: list[tuple[frozenset[int], _Identity]] = []
+    ordered = sorted(identities.items(), key=lambda item: (-item[1].held, min(item[0])))
+    for identity, entry in ordered:
+        for head, merged in groups:
+            if merged.label != entry.label:
+                continue
+            shared = len(identity & head)
+            if shared >= overlap * len(identity) and shared >= overlap * len(head):
+                merged.absorb(entry)
+                break
+        else:
+            fresh = _Identity(entry.label)
+            fresh.absorb(entry)
+            groups.append((identity, fresh))
+    return groups
 
 
 def _mean_trajectory(weighted: Sequence[tuple[NDArray[np.float64], float]]) -> NDArray[np.float64]:
@@ -151,6 +195,7 @@ def build_from_samples(
     spurious_location_stddev_m: float = 0.30,
     existence_threshold: float = 0.5,
     report_min_fraction: float = 0.05,
+    identity_overlap: float = 1.0,
     diagnostics: dict[str, Any] | None = None,
 ) -> BuiltMap:
     """Paper Algorithm 1 over ``(summary, multiplicity)`` pairs (see the module docstring).
@@ -177,8 +222,10 @@ def build_from_samples(
     if len({t.shape for t, _ in trajectories}) != 1 or trajectories[0][0].shape != (len(stamps_ns), 3):
         raise MapBuildError(f"sample trajectories must all be ({len(stamps_ns)}, 3)")
 
+    if not 0.5 < identity_overlap <= 1.0:
+        raise MapBuildError(f"identity_overlap must lie in (0.5, 1], got {identity_overlap}")
     rows = []
-    for identity, entry in identities.items():
+    for identity, entry in _group_identities(identities, identity_overlap):
         probability = entry.weight[True] / total
         seen = (entry.weight[True] + entry.weight[False]) / total
         if probability > existence_threshold or seen >= report_min_fraction:
@@ -209,6 +256,7 @@ def build_from_samples(
         {
             "map_samples": int(total),
             "identities": len(identities),
+            "identity_overlap": float(identity_overlap),
             "spurious_location_stddev_m": float(spurious_location_stddev_m),
             "existence_threshold": float(existence_threshold),
         }

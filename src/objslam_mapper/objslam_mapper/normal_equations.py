@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from objslam_mapper.geometry import wrap_angle
+from objslam_mapper.outliers import WARM_START_CAP_SCALE, WARM_START_MAX_BEYOND, half_chi2, truncate
 from objslam_mapper.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
 
@@ -69,6 +70,7 @@ class Layout:
     object_of: NDArray[np.int64]
     pose_of: NDArray[np.int64]
     labels: NDArray[np.int64]  # (K,) label index of each object
+    priors: NDArray[np.int64]  # (K,) prior row of each object (its class's unless given)
     pose_bins: NDArray[np.int64]  # (3, 3, A) bins of the per-slice pose blocks in (N, 3, 3)
     pose_grad_bins: NDArray[np.int64]  # (3, A) bins in (N, 3)
     starts: NDArray[np.int64]  # (K,) where each object's run of measurements starts
@@ -90,6 +92,7 @@ class Linearization:
 
     cost: float
     valid: bool
+    outliers: int = 0  # slices beyond their (unscaled) outlier cost
     grad_pose: NDArray[np.float64] | None = None  # (3N,)
     grad_object: NDArray[np.float64] | None = None  # (5K,)
     pose_diag: NDArray[np.float64] | None = None  # (N, 3, 3)
@@ -132,8 +135,11 @@ class Factorization:
     sparse_lu: scipy.sparse.linalg.SuperLU | None = None  # sparse path
 
 
-def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike]) -> Layout:
-    """Validate an association (one array of measurement indices per object) and index it."""
+def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike], priors: ArrayLike | None = None) -> Layout:
+    """Validate an association (one array of measurement indices per object) and index it.
+
+    ``priors[j]`` is the prior row of object j (``problem.prior_mean``); default its class's.
+    """
     arrays = tuple(np.asarray(g, dtype=np.int64).reshape(-1) for g in groups)
     sizes = np.array([len(g) for g in arrays], dtype=np.int64)
     if np.any(sizes == 0):
@@ -149,6 +155,14 @@ def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike]) -> Layout:
     mixed = label_of != labels[object_of]
     if np.any(mixed):
         raise GraphError(f"group {int(object_of[np.argmax(mixed)])} mixes classes; an object holds one class")
+    if priors is None:
+        prior_rows = labels.copy()
+    else:
+        prior_rows = np.asarray(priors, dtype=np.int64).reshape(-1)
+        if len(prior_rows) != len(arrays):
+            raise GraphError(f"{len(prior_rows)} prior rows for {len(arrays)} groups")
+        if len(prior_rows) and (prior_rows.min() < 0 or prior_rows.max() >= len(problem.prior_mean)):
+            raise GraphError(f"prior rows must lie in [0, {len(problem.prior_mean)})")
     for g in arrays:
         g.flags.writeable = False
     pose_of = problem.measurement_pose[measurements]
@@ -162,11 +176,46 @@ def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike]) -> Layout:
         object_of=object_of,
         pose_of=pose_of,
         labels=labels,
+        priors=prior_rows,
         pose_bins=(POSE_DIM * pose_of + p3)[:, None, :] * POSE_DIM + p3.T[:, :, None],
         pose_grad_bins=POSE_DIM * pose_of + p3,
         starts=np.cumsum(sizes) - sizes,
         cross_bins=(POSE_DIM * pose_of + p3)[:, None, :] * n_cols + (OBJECT_DIM * object_of + o5)[None, :, :],
         cross_unique=not len(measurements) or np.bincount(pose_of * len(arrays) + object_of).max() == 1,
+    )
+
+
+def first_phase_cap_scale(
+    problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, warm_start: bool
+) -> float:
+    """The outlier caps' multiplier in a solve's first phase (objslam_mapper.outliers):
+    raised from a warm start near a solution, inf (Gaussian slices) otherwise."""
+    if not warm_start:
+        return np.inf
+    beyond = count_outliers(problem, layout, poses, objects, WARM_START_CAP_SCALE)
+    return WARM_START_CAP_SCALE if beyond <= WARM_START_MAX_BEYOND * len(layout.measurements) else np.inf
+
+
+def count_outliers(
+    problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, cap_scale: float = 1.0
+) -> int:
+    """Slices of the association beyond their outlier cost (times ``cap_scale``) at this state."""
+    obj = objects[layout.object_of]
+    pred = predict_reduced(poses[layout.pose_of], obj[:, :3], obj[:, 3:], problem.mount, jacobians=False)
+    res = pred.values - problem.measurements[layout.measurements].T
+    res[BEARING] = wrap_angle(res[BEARING])
+    res /= problem.measurement_stddev[layout.measurements].T
+    if not np.all(pred.valid):
+        return len(res[0])
+    return int(np.count_nonzero(half_chi2(res) > cap_scale * problem.measurement_outlier_cost[layout.measurements]))
+
+
+def graph_log_normalizer(problem: GraphProblem, layout: Layout) -> float:
+    """Sum of the log-normalizers of every factor of the association's graph."""
+    return (
+        problem.trajectory_log_normalizer
+        + float(np.sum(problem.measurement_log_normalizer[layout.measurements]))
+        + float(np.sum(problem.prior_log_normalizer[layout.priors]))
     )
 
 
@@ -277,15 +326,14 @@ class AssociationSystem:
         self.n_calib = problem.calibration_dim
         self.z = np.ascontiguousarray(problem.measurements[layout.measurements].T)  # (4, A)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[layout.measurements].T)
+        self.outlier_cost = problem.measurement_outlier_cost[layout.measurements]
+        self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
+        self.cap_scale = 1.0  # the caps' multiplier (objslam_mapper.outliers; inf: every slice Gaussian)
         self.inc_inv_sigma = 1.0 / problem.increment_stddev
         self.calib_inv_sigma = 1.0 / problem.calibration_prior_stddev
-        self.prior_mean = problem.prior_mean[layout.labels]
-        self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.labels]
-        self.log_normalizer = (
-            problem.trajectory_log_normalizer
-            + float(np.sum(problem.measurement_log_normalizer[layout.measurements]))
-            + float(np.sum(problem.prior_log_normalizer[layout.labels]))
-        )
+        self.prior_mean = problem.prior_mean[layout.priors]
+        self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.priors]
+        self.log_normalizer = graph_log_normalizer(problem, layout)
 
     @property
     def dimension(self) -> int:
@@ -390,7 +438,13 @@ class AssociationSystem:
         sl = pred.values - self.z
         sl[BEARING] = wrap_angle(sl[BEARING])
         sl *= self.inv_sigma
-        jac = pred.jacobian * self.inv_sigma[:, None, :]  # (4, 6, A)
+        half = half_chi2(sl)
+        outliers = int(np.count_nonzero(half > self.outlier_cost))
+        if self.has_outlier_model and self.cap_scale < np.inf:
+            within = truncate(sl, self.outlier_cost * self.cap_scale, half)
+            jac = pred.jacobian * (self.inv_sigma * within)[:, None, :]  # (4, 6, A); capped slices carry no information
+        else:
+            jac = pred.jacobian * self.inv_sigma[:, None, :]
         jac_pose = jac[:, :3] * _POSE_SIGN[None, :, None]  # (4, 3, A)
         jac_object = jac[:, _OBJECT_COLUMNS]  # (4, 5, A)
         odo_cost, diag_i, diag_j, pose_off, grad_pose, terms = self._odometry(poses, calib)
@@ -421,6 +475,7 @@ class AssociationSystem:
         return Linearization(
             cost,
             True,
+            outliers,
             grad_pose.ravel(),
             grad_object.ravel(),
             pose_diag,

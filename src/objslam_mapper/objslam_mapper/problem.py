@@ -11,14 +11,18 @@ sampler (:func:`objslam_mapper.solver.solve`). It holds
   i.e. images by stamp, then slice order): ``measurements[m]`` = (bearing, angular width, elevation bottom,
   elevation top), its noise, the pose it was seen from, its class; ``measurement_image``
   and ``measurement_slot`` lead back to the input ``images[i].slices[k]``. Slices of
-  low confidence (likely cut short) get inflated noise;
+  low confidence (likely cut short) get inflated noise; ``measurement_outlier_cost`` is
+  where each slice's cost stops growing (:mod:`objslam_mapper.outliers`);
 - when ``odometry.calibration.enabled``, the zero-mean prior of the odometry calibration
   ``c = (distance_scale, turn_scale, turn_bias_rad_per_m)`` (one variable per map, see
   :mod:`objslam_mapper.normal_equations`) and each increment's measured path length, which
   the turn bias multiplies;
 - the class priors (paper eqs. 7-8) as per-class means and standard deviations of the
   object vector ``(x, y, z_base, diameter, height)``: ``x, y`` weak around the first
-  pose (``xy_stddev_m``), ``z_base`` and the size from the catalog;
+  pose (``xy_stddev_m``), ``z_base`` and the size from the catalog. They are the first
+  ``len(labels)`` *prior rows*; a group of a solve takes its class's row unless told
+  otherwise, and :func:`with_extra_priors` appends rows for things that are not objects
+  of a class (the sampler's static distractors);
 - the log-normalizers ``-0.5 log|2 pi Sigma|`` of every Gaussian factor, for the evidence.
 
 Slices whose class is not in the catalog, and images outside the odometry span, are left
@@ -27,6 +31,7 @@ out and counted (``rejected_slice_count``, ``rejected_image_count``).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -37,6 +42,7 @@ from numpy.typing import NDArray
 from objslam_mapper.camera import CameraMount
 from objslam_mapper.catalog import Catalog, ObjectClass
 from objslam_mapper.graph_config import GraphConfig, SliceNoiseConfig, SolverConfig
+from objslam_mapper.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.records import ImageSlices, OdometrySample
 from objslam_mapper.slice_model import ELEVATION_BOTTOM
 from objslam_mapper.trajectory import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
@@ -88,13 +94,14 @@ class GraphProblem:
     measurement_confidence: NDArray[np.float64]
     measurement_image: NDArray[np.int64]
     measurement_slot: NDArray[np.int64]
-    # Class priors (L)
-    prior_mean: NDArray[np.float64]  # (L, 5)
-    prior_stddev: NDArray[np.float64]  # (L, 5)
+    # Prior rows (P >= L): row k < L is class k's prior
+    prior_mean: NDArray[np.float64]  # (P, 5)
+    prior_stddev: NDArray[np.float64]  # (P, 5)
     # Log-normalizers of the Gaussian factors
     trajectory_log_normalizer: float  # odometry factors + first-pose prior + calibration prior
-    measurement_log_normalizer: NDArray[np.float64]  # (M,)
-    prior_log_normalizer: NDArray[np.float64]  # (L,)
+    measurement_log_normalizer: NDArray[np.float64]  # (M,) Gaussian normalizer + log(1 - outlier probability)
+    measurement_outlier_cost: NDArray[np.float64]  # (M,) cap of a slice's half chi-square (inf: none)
+    prior_log_normalizer: NDArray[np.float64]  # (P,) per prior row
     rejected_image_count: int = 0
     rejected_slice_count: int = 0
 
@@ -113,6 +120,22 @@ class GraphProblem:
 
     def label_of(self, measurement: int) -> str:
         return self.labels[int(self.measurement_label[measurement])]
+
+
+def with_extra_priors(
+    problem: GraphProblem, mean: NDArray[np.float64], stddev: NDArray[np.float64]
+) -> tuple[GraphProblem, int]:
+    """``problem`` with prior rows ``mean``, ``stddev`` (R, 5) appended, and the index of the first."""
+    first = len(problem.prior_mean)
+    mean = np.concatenate([problem.prior_mean, np.asarray(mean, dtype=float).reshape(-1, OBJECT_DIM)])
+    stddev = np.concatenate([problem.prior_stddev, np.asarray(stddev, dtype=float).reshape(-1, OBJECT_DIM)])
+    extended = dataclasses.replace(
+        problem,
+        prior_mean=_readonly(mean),
+        prior_stddev=_readonly(stddev),
+        prior_log_normalizer=_readonly(gaussian_log_normalizer(stddev)),
+    )
+    return extended, first
 
 
 def class_measurement_stddev(cls: ObjectClass, noise: SliceNoiseConfig, mount: CameraMount) -> NDArray[np.float64]:
@@ -182,6 +205,8 @@ def build_problem(
     if rejected_slices:
         logger.warning("%d slices of classes not in the catalog were left out", rejected_slices)
     meas_stddev = np.array(stddev, dtype=float).reshape(-1, 4)
+    gaussian_norm = gaussian_log_normalizer(meas_stddev)
+    noise = config.slice_noise
 
     first_xy = poses[0, :2]
     prior_mean = np.array([[first_xy[0], first_xy[1], c.z_base_m, c.diameter_m, c.height_m] for c in classes])
@@ -215,7 +240,10 @@ def build_problem(
         prior_mean=_readonly(prior_mean.reshape(-1, OBJECT_DIM)),
         prior_stddev=_readonly(prior_stddev.reshape(-1, OBJECT_DIM)),
         trajectory_log_normalizer=trajectory_norm,
-        measurement_log_normalizer=_readonly(gaussian_log_normalizer(meas_stddev)),
+        measurement_log_normalizer=_readonly(gaussian_norm + inlier_log_weight(noise.outlier_probability)),
+        measurement_outlier_cost=_readonly(
+            outlier_cost(gaussian_norm, noise.outlier_probability, noise.outlier_volume_rad4)
+        ),
         prior_log_normalizer=_readonly(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
         rejected_image_count=at.rejected_count,
         rejected_slice_count=rejected_slices,

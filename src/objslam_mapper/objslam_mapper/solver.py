@@ -18,7 +18,9 @@ The Laplace approximation of the evidence (paper eq. 25) at the MAP ``theta*`` i
                      + d/2 log(2 pi) - 1/2 log|Lambda|,
 
 summed over every factor of the graph (odometry, first-pose prior, assigned slices,
-object priors, and the odometry calibration's prior when it is estimated), with
+object priors, and the odometry calibration's prior when it is estimated; a slice's
+factor is the max-mixture of :mod:`objslam_mapper.outliers`, so an outlier slice adds
+its capped cost and no information), with
 ``d = 3N + 5K (+ 3 for the calibration)`` and ``Lambda = J^T Sigma^-1 J`` the Gauss-Newton
 information at the MAP (``2 log|R|`` of GTSAM's square-root information). Measurements in no
 group are not part of the graph: the sampler scores them with its clutter model. A new
@@ -55,7 +57,14 @@ from numpy.typing import ArrayLike, NDArray
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.initialization import initial_object
-from objslam_mapper.normal_equations import AssociationSystem, Factorization, Layout, Linearization, layout_of
+from objslam_mapper.normal_equations import (
+    AssociationSystem,
+    Factorization,
+    Layout,
+    Linearization,
+    first_phase_cap_scale,
+    layout_of,
+)
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
 from objslam_mapper.slice_model import camera_positions
 
@@ -153,16 +162,20 @@ def solve(
     *,
     with_covariances: bool = False,
     max_iterations: int | None = None,
+    priors: ArrayLike | None = None,
 ) -> GraphSolution:
     """MAP, evidence and (optionally) object marginals of the association ``groups``.
 
     ``groups[j]`` lists the global measurement indices of object j (sequence or integer
     array; one class per group, no measurement twice). Measurements in no group are left
-    out of the graph. ``max_iterations`` overrides ``solver.max_iterations`` for this call
-    (a sampler may cap hopeless proposals: an unconverged solution reports the evidence
-    at its last iterate, which is below that of the optimum up to the log-determinant).
+    out of the graph. ``priors[j]`` is the prior row of object j (default: its class's;
+    :func:`objslam_mapper.problem.with_extra_priors`). ``max_iterations`` overrides
+    ``solver.max_iterations`` for this call, per phase (Gaussian slices, then with the
+    outlier model); a sampler may cap hopeless proposals: an unconverged solution reports
+    the evidence at its last iterate, which is below that of the optimum up to the
+    log-determinant.
     """
-    layout = layout_of(problem, groups)
+    layout = layout_of(problem, groups, priors)
     graph = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
     poses, objects = initial_state(problem, layout, warm_start)
     calib = initial_calibration(problem, warm_start)
@@ -172,7 +185,16 @@ def solve(
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
         return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
+    # Two phases (objslam_mapper.outliers): raised caps (none from a cold start), then the
+    # true ones; where no slice is beyond its true cap the costs agree and one phase is enough.
+    graph.cap_scale = first_phase_cap_scale(problem, layout, poses, objects, warm_start is not None)
+    lin = graph.linearize(poses, objects, calib)
     state, lin, final, iterations, converged = _minimize(graph, (poses, objects, calib), lin, problem.solver, limit)
+    if graph.has_outlier_model and lin.outliers:
+        graph.cap_scale = 1.0
+        lin = graph.linearize(*state)
+        state, lin, final, more, converged = _minimize(graph, state, lin, problem.solver, limit)
+        iterations += more
     poses, objects, calib = state
     if final is None:
         final = graph.factorize(lin, 0.0)

@@ -275,7 +275,7 @@ def class_shapes(problem: GraphProblem) -> dict[str, ClassShape]:
     """Nominal geometry per class from the problem's class priors."""
     return {
         label: ClassShape(z_base_m=float(mean[2]), diameter_m=float(mean[3]), height_m=float(mean[4]))
-        for label, mean in zip(problem.labels, problem.prior_mean, strict=True)
+        for label, mean in zip(problem.labels, problem.prior_mean[: len(problem.labels)], strict=True)
     }
 
 
