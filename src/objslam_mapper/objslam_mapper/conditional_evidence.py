@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.outliers import WARM_START_CAP_SCALE, half_chi2, truncate
+from objslam_mapper.outliers import WARM_START_CAP_SCALES, half_chi2, truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
 
@@ -123,16 +123,18 @@ def object_evidence(
     evidence at its last iterate, as :func:`objslam_mapper.solver.solve` does.
     """
     system = _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64), prior)
-    # As solver.solve from a warm start: the poses are a MAP's, the start near the object.
-    system.cap_scale = WARM_START_CAP_SCALE
     state = np.array(start, dtype=float)
     if system.linearize(state)[1] is None:
         return ObjectEvidence(-math.inf, state, 0, False)
     tolerances = (absolute_tolerance, relative_tolerance)
-    state, cost, _, info, iterations, converged = _minimize(system, state, max_iterations, tolerances)
-    system.linearize(state)  # counts the slices beyond their true cap where the first phase ended
-    if system.has_outlier_model and system.outliers:
-        system.cap_scale = 1.0
+    # As solver.solve from a warm start: the poses are a MAP's, the start near the object.
+    iterations, converged = 0, False
+    for phase, scale in enumerate(WARM_START_CAP_SCALES):
+        if phase:
+            system.linearize(state)  # counts the slices beyond their true cap where the last phase ended
+            if not (system.has_outlier_model and system.outliers):
+                break
+        system.cap_scale = scale
         state, cost, _, info, more, converged = _minimize(system, state, max_iterations, tolerances)
         iterations += more
     sign, log_det = np.linalg.slogdet(info)

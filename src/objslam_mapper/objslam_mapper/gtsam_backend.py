@@ -65,8 +65,8 @@ from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.normal_equations import (
     Layout,
+    cap_schedule,
     count_outliers,
-    first_phase_cap_scale,
     graph_log_normalizer,
     layout_of,
 )
@@ -508,11 +508,10 @@ def solve_gtsam(
     limit = cfg.max_iterations if max_iterations is None else max_iterations
     keys = GtsamKeys(problem.pose_count, layout.n_objects, problem.calibration_dim)
     values = keys.to_values(poses, objects, calib)
-    # As the fast solver: raised caps (none from a cold start), then the true ones if a
-    # slice is beyond its true cap (elsewhere the two costs agree).
+    # As the fast solver: graduated caps, each phase only while a slice is beyond its true cap.
     iterations = 0
-    for cap_scale in (first_phase_cap_scale(problem, layout, poses, objects, warm_start is not None), 1.0):
-        if cap_scale == 1.0 and iterations and not count_outliers(problem, layout, *keys.from_values(values)):
+    for phase, cap_scale in enumerate(cap_schedule(problem, layout, poses, objects, warm_start is not None)):
+        if phase and not count_outliers(problem, layout, *keys.from_values(values)):
             break
         graph, keys = _build(problem, layout, per_detection, window_poses, cap_scale)
         linearize = _Linearizer(graph, keys)

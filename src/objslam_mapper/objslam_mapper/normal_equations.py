@@ -52,7 +52,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.outliers import WARM_START_CAP_SCALE, WARM_START_MAX_BEYOND, half_chi2, truncate
+from objslam_mapper.outliers import (
+    COLD_START_CAP_SCALES,
+    WARM_START_CAP_SCALES,
+    WARM_START_MAX_BEYOND,
+    half_chi2,
+    truncate,
+)
 from objslam_mapper.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
 
@@ -185,15 +191,15 @@ def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike], priors: ArrayL
     )
 
 
-def first_phase_cap_scale(
+def cap_schedule(
     problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, warm_start: bool
-) -> float:
-    """The outlier caps' multiplier in a solve's first phase (objslam_mapper.outliers):
-    raised from a warm start near a solution, inf (Gaussian slices) otherwise."""
-    if not warm_start:
-        return np.inf
-    beyond = count_outliers(problem, layout, poses, objects, WARM_START_CAP_SCALE)
-    return WARM_START_CAP_SCALE if beyond <= WARM_START_MAX_BEYOND * len(layout.measurements) else np.inf
+) -> tuple[float, ...]:
+    """The outlier caps' multipliers, phase by phase (objslam_mapper.outliers)."""
+    if warm_start:
+        first = WARM_START_CAP_SCALES[0]
+        if count_outliers(problem, layout, poses, objects, first) <= WARM_START_MAX_BEYOND * len(layout.measurements):
+            return WARM_START_CAP_SCALES
+    return COLD_START_CAP_SCALES
 
 
 def count_outliers(

@@ -53,16 +53,21 @@ def inlier_log_weight(probability: float) -> float:
     return math.log1p(-probability) if probability > 0.0 else 0.0
 
 
-# The solvers minimize in two phases (objslam_mapper.normal_equations.first_phase_cap_scale):
-# first with every cap multiplied by this or, from a cold start, with no cap at all
-# (Gaussian slices), then with the true caps. From drifted odometry, or when a move closes
-# a loop, good slices sit far beyond their cap and the truncated cost would leave them out
-# instead of moving the poses to fit them; a warm start is near a solution already, and a
-# cap 100 times higher (about 68 sigma) still lets every slice of a loop closure pull
-# while the slices of another object's blob (thousands of sigma off) stay out of the way.
-WARM_START_CAP_SCALE = 100.0
-# ... unless more than this share of the slices is beyond even those caps at the start:
-# that is no warm start (a move that changed much), and the first phase is Gaussian.
+# The solvers minimize in phases, graduating the caps (graduated non-convexity, as in
+# Yang et al. 2020): each cap multiplied by the phase's scale, the last phase with the
+# true caps (objslam_mapper.normal_equations.cap_schedule). From drifted odometry, or when
+# a move closes a loop, good slices sit far beyond their cap and the truncated cost would
+# leave them out instead of moving the poses to fit them, so a cold solve starts Gaussian
+# (no cap at all); a warm start is near a solution already, and caps 100 times higher
+# (about 68 sigma) still let every slice of a loop closure pull while the slices of
+# another object's blob (thousands of sigma off) stay out of the way. The middle phase
+# keeps a handful of gross outliers, which pull the first phase's fit aside, from turning
+# good slices into outliers when the true caps come: jumping from no cap to the true one
+# can leave the solve in that compromise.
+COLD_START_CAP_SCALES = (math.inf, 10.0, 1.0)
+WARM_START_CAP_SCALES = (100.0, 10.0, 1.0)
+# A warm start where more than this share of the slices is beyond even its raised caps is
+# no warm start (a move that changed much): the solve then starts Gaussian.
 WARM_START_MAX_BEYOND = 0.05
 
 

@@ -62,7 +62,7 @@ from objslam_mapper.normal_equations import (
     Factorization,
     Layout,
     Linearization,
-    first_phase_cap_scale,
+    cap_schedule,
     layout_of,
 )
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
@@ -170,8 +170,8 @@ def solve(
     array; one class per group, no measurement twice). Measurements in no group are left
     out of the graph. ``priors[j]`` is the prior row of object j (default: its class's;
     :func:`objslam_mapper.problem.with_extra_priors`). ``max_iterations`` overrides
-    ``solver.max_iterations`` for this call, per phase (Gaussian slices, then with the
-    outlier model); a sampler may cap hopeless proposals: an unconverged solution reports
+    ``solver.max_iterations`` for this call, per phase of the outlier caps
+    (:mod:`objslam_mapper.outliers`); a sampler may cap hopeless proposals: an unconverged solution reports
     the evidence at its last iterate, which is below that of the optimum up to the
     log-determinant.
     """
@@ -185,13 +185,13 @@ def solve(
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
         return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
-    # Two phases (objslam_mapper.outliers): raised caps (none from a cold start), then the
-    # true ones; where no slice is beyond its true cap the costs agree and one phase is enough.
-    graph.cap_scale = first_phase_cap_scale(problem, layout, poses, objects, warm_start is not None)
-    lin = graph.linearize(poses, objects, calib)
-    state, lin, final, iterations, converged = _minimize(graph, (poses, objects, calib), lin, problem.solver, limit)
-    if graph.has_outlier_model and lin.outliers:
-        graph.cap_scale = 1.0
+    # Phases of graduated outlier caps (objslam_mapper.outliers); where no slice is beyond
+    # its true cap the remaining phases' costs agree with the current one: they are moot.
+    iterations, state = 0, (poses, objects, calib)
+    for phase, scale in enumerate(cap_schedule(problem, layout, poses, objects, warm_start is not None)):
+        if phase and not (graph.has_outlier_model and lin.outliers):
+            break
+        graph.cap_scale = scale
         lin = graph.linearize(*state)
         state, lin, final, more, converged = _minimize(graph, state, lin, problem.solver, limit)
         iterations += more
