@@ -16,6 +16,7 @@ from objslam_mapper.inference import (
     AssociationTarget,
     SamplerConfig,
     build_map,
+    clear_start_objects,
     infer_map,
     initial_association,
 )
@@ -249,3 +250,21 @@ def test_a_floor_patch_prefers_clutter_and_starts_there_while_a_short_object_doe
 def test_sampler_config_validates():
     with pytest.raises(ValueError, match="burn_in"):
         dataclasses.replace(QUICK, burn_in=500)
+
+
+def test_a_start_object_made_of_a_patch_seen_twice_is_cleared_to_clutter():
+    """A floor patch near the start is seen on the way out and back: two tracklets that the
+    start state joins into one object of its class. The target prefers all of it as
+    clutter, and the start is moved there before the chain runs."""
+    yellow = SyntheticObject("yellow", (2.5, 1.3, 0.0), (0.52, 0.29))
+    patch = SyntheticObject("blue", (1.5, -1.2, 0.0), (0.18, 0.003))
+    problem = problem_of(simulate((yellow, patch)))
+    chained = tracklets_of_problem(problem)
+    target = AssociationTarget(problem, chained.tracklets, ClutterConfig())
+    blue = [t for t, label in enumerate(chained.labels) if label == "blue"]
+    assert len(blue) >= 2
+    joined = Association.of([0 if t in blue else 1 for t in range(len(chained.labels))])
+    cleared, moved = clear_start_objects(target, joined)
+    assert moved == blue
+    assert set(cleared.clutter) == set(blue) and cleared.n_objects == 1
+    assert target(cleared) > target(joined)

@@ -141,3 +141,56 @@ def test_a_fitting_slice_favours_an_object_over_clutter_by_default():
     )
     assert float(gaussian_log_normalizer(stddev)) == pytest.approx(15.0, abs=0.5)
     assert ClutterConfig().log_likelihood_per_slice == pytest.approx(-5.4, abs=0.7)
+
+
+# -- identities up to a minority of their measurements (identity_overlap) ------------------
+
+CORE = frozenset(range(100))
+
+
+def _variants(extra_per_sample):
+    """Samples of one object: CORE plus a few slices that differ from sample to sample."""
+    return [
+        (SampleSummary(trajectory(), (obj(CORE | frozenset(extra), 1.0 + 0.01 * k),)), 1)
+        for k, extra in enumerate(extra_per_sample)
+    ]
+
+
+def test_variants_of_one_object_that_differ_by_a_few_slices_are_one_identity():
+    samples = _variants([range(100, 110), range(110, 115), (), range(120, 130)])
+    exact = build_from_samples(samples, STAMPS, identity_overlap=1.0)
+    assert not exact.objects  # four variants of 1/4 each: none above 1/2
+    grouped = build_from_samples(samples, STAMPS, identity_overlap=0.8)
+    assert len(grouped.objects) == 1
+    one = grouped.objects[0]
+    assert one.existence_probability == pytest.approx(1.0)
+    assert one.position_m[0] == pytest.approx(1.015)  # mean over all four samples
+    assert grouped.diagnostics["identities"] == 4 and grouped.diagnostics["identity_overlap"] == 0.8
+
+
+def test_identities_differing_by_more_than_the_overlap_stay_apart():
+    half = frozenset(range(50))
+    samples = [
+        (SampleSummary(trajectory(), (obj(CORE, 1.0),)), 1),
+        (SampleSummary(trajectory(), (obj(half, 1.0), obj(CORE - half, 1.5))), 1),
+    ]
+    built = build_from_samples(samples, STAMPS, identity_overlap=0.8, report_min_fraction=0.0)
+    assert sorted(o.measurement_count for o in built.objects + built.rejected) == [50, 50, 100]
+    assert all(o.existence_probability == pytest.approx(0.5) for o in built.rejected)
+
+
+def test_two_objects_of_one_sample_never_join_one_identity():
+    """With overlap above 1/2 two disjoint sets cannot both hold that share of a third."""
+    a, b = frozenset(range(60)), frozenset(range(60, 100))
+    samples = [
+        (SampleSummary(trajectory(), (obj(CORE, 1.0),)), 3),
+        (SampleSummary(trajectory(), (obj(a, 1.0), obj(b, 1.4))), 1),
+    ]
+    built = build_from_samples(samples, STAMPS, identity_overlap=0.55, report_min_fraction=0.0)
+    assert built.objects[0].existence_probability == pytest.approx(1.0)  # CORE and a (60 % of it) are one
+    assert [o.measurement_count for o in built.rejected] == [40]
+
+
+def test_identity_overlap_must_exceed_one_half():
+    with pytest.raises(MapBuildError, match="identity_overlap"):
+        build_from_samples(_variants([()]), STAMPS, identity_overlap=0.5)

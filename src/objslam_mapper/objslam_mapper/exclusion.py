@@ -12,11 +12,12 @@ configurations that overlap nowhere, is close to 1 for objects this small in a r
 is left out). Per pair ``(i, j)``, with the MAP offset ``delta`` of their axes, its length
 ``D`` and direction ``u``, and the required gap ``g = (d_i + d_j) / 2``:
 
-    P(no overlap of i, j) ~= Phi((D - g) / s),   s^2 = u^T (C_i + C_j) u + (var d_i + var d_j) / 4,
+    P(no overlap of i, j) ~= Phi((D - g) / s),
 
-``C`` the horizontal location covariances. The pairs are taken as independent, so
-``log P(no overlap | J, Z) = sum over pairs of log Phi(...)``. ``C`` and ``var d`` are each
-object's covariance with the robot's poses held at the MAP: the pose errors two nearby
+``s^2`` the variance of ``D - g`` linearized at the MAP (each object's location, diameter
+and their correlation). The pairs are taken as independent, so
+``log P(no overlap | J, Z) = sum over pairs of log Phi(...)``. The covariances are each
+object's with the robot's poses held at the MAP: the pose errors two nearby
 objects share cancel in their offset, and this is what is left. Pairs whose gap is
 many standard deviations clear contribute nothing and are not evaluated.
 
@@ -42,6 +43,42 @@ from objslam_mapper.problem import GraphProblem
 _EVALUATED_GAP_M = 0.3
 
 
+def near_pairs(objects: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs (i < j) of (K, 5) objects whose MAP footprints are within the evaluated gap."""
+    objects = np.asarray(objects, dtype=float).reshape(-1, 5)
+    i, j = np.triu_indices(len(objects), 1)
+    dist = np.hypot(*(objects[i, :2] - objects[j, :2]).T)
+    near = dist - 0.5 * (objects[i, 3] + objects[j, 3]) < _EVALUATED_GAP_M
+    return i[near], j[near]
+
+
+def pairs_log_probability(
+    objects: NDArray[np.float64],
+    covariances: dict[int, NDArray[np.float64]],
+    pairs: tuple[NDArray[np.int64], NDArray[np.int64]],
+) -> float:
+    """Sum over ``pairs`` of ``log Phi((D - g) / s)`` (module docstring).
+
+    ``objects`` (K, 5) as (x, y, z_base, diameter, height), ``covariances[k]`` the (5, 5)
+    covariance of object k; a pair with an undetermined object (no finite variance) counts 0.
+    """
+    objects = np.asarray(objects, dtype=float).reshape(-1, 5)
+    total = 0.0
+    for a, b in zip(*pairs, strict=True):
+        delta = objects[a, :2] - objects[b, :2]
+        dist = float(np.hypot(*delta))
+        u = delta / dist if dist > 0.0 else np.array([1.0, 0.0])
+        # Linearized: d (D - g) / d object a = (u, 0, -1/2, 0), / d object b = (-u, 0, -1/2, 0).
+        grad_a = np.array([u[0], u[1], 0.0, -0.5, 0.0])
+        grad_b = np.array([-u[0], -u[1], 0.0, -0.5, 0.0])
+        var = grad_a @ covariances[a] @ grad_a + grad_b @ covariances[b] @ grad_b
+        if not np.isfinite(var) or var <= 0.0:
+            continue  # an object the model cannot place says nothing about overlap
+        gap = 0.5 * (objects[a, 3] + objects[b, 3])
+        total += float(log_ndtr((dist - gap) / np.sqrt(var)))
+    return total
+
+
 def no_overlap_log_probability(
     problem: GraphProblem,
     map_T_base: NDArray[np.float64],
@@ -52,31 +89,15 @@ def no_overlap_log_probability(
     """``log P(no two objects overlap | J, Z)`` (module docstring).
 
     ``objects`` (K, 5) are the MAP objects (x, y, z_base, diameter, height) of ``groups``
-    (their measurement indices) with prior rows ``priors``, ``map_T_base`` the MAP poses.
+    (their measurement indices) with prior rows ``priors``, ``map_T_base`` the MAP poses;
+    each near object's covariance is its information's inverse with the poses held there.
     """
     objects = np.asarray(objects, dtype=float).reshape(-1, 5)
-    k = len(objects)
-    if k < 2:
+    pairs = near_pairs(objects)
+    if not len(pairs[0]):
         return 0.0
-    i, j = np.triu_indices(k, 1)
-    delta = objects[i, :2] - objects[j, :2]
-    dist = np.hypot(delta[:, 0], delta[:, 1])
-    gap = 0.5 * (objects[i, 3] + objects[j, 3])
-    near = np.flatnonzero(dist - gap < _EVALUATED_GAP_M)
-    if not len(near):
-        return 0.0
-    covariance: dict[int, NDArray[np.float64]] = {}
-    for index in np.unique(np.concatenate([i[near], j[near]])):
-        info = object_information(problem, map_T_base, groups[index], objects[index], priors[index])
-        covariance[int(index)] = np.full((5, 5), np.inf) if info is None else np.linalg.inv(info)
-    total = 0.0
-    for p in near:
-        a, b = int(i[p]), int(j[p])
-        u = delta[p] / dist[p] if dist[p] > 0.0 else np.array([1.0, 0.0])
-        var = u @ (covariance[a][:2, :2] + covariance[b][:2, :2]) @ u + 0.25 * (
-            covariance[a][3, 3] + covariance[b][3, 3]
-        )
-        if not np.isfinite(var) or var <= 0.0:
-            continue  # an object the model cannot place says nothing about overlap
-        total += float(log_ndtr((dist[p] - gap[p]) / np.sqrt(var)))
-    return total
+    covariances: dict[int, NDArray[np.float64]] = {}
+    for k in np.unique(np.concatenate(pairs)):
+        info = object_information(problem, map_T_base, groups[k], objects[k], priors[k])
+        covariances[int(k)] = np.full((5, 5), np.inf) if info is None else np.linalg.inv(info)
+    return pairs_log_probability(objects, covariances, pairs)

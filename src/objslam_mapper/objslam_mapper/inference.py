@@ -135,7 +135,7 @@ class SamplerConfig:
         0.1, "... or by up to this fraction of its log ratio, whichever is larger", minimum=0.0
     )
     screen_floor: float = setting(
-        0.1,
+        0.01,
         "a proposal the screen condemns still gets a graph solve with this probability (loop closures)",
         minimum=1e-6,
         maximum=1.0,
@@ -431,7 +431,9 @@ def initial_association(
     return Association.from_groups(len(tracklets), members)
 
 
-def clear_start_objects(target: AssociationTarget, state: Association) -> tuple[Association, list[int]]:
+def clear_start_objects(
+    target: AssociationTarget, state: Association, screen_margin_nats: float = 20.0
+) -> tuple[Association, list[int]]:
     """Move to clutter, one at a time, each start object whose tracklets the target prefers there.
 
     A distractor seen in several tracklets (a patch on the floor, passed twice) starts as
@@ -439,8 +441,9 @@ def clear_start_objects(target: AssociationTarget, state: Association) -> tuple[
     well enough (a short look leaves the size to the prior), while together they pin a
     shape far off it; taking such an object apart one tracklet at a time first loses, so a
     chain started there stays. This greedy pass, largest objects last, only moves the
-    start: the target and the chain's exactness do not change. Returns the new start and
-    the tracklets moved.
+    start: the target and the chain's exactness do not change. A candidate the screen
+    (poses fixed) judges worse by more than ``screen_margin_nats`` is not solved. Returns
+    the new start and the tracklets moved.
     """
     moved: list[int] = []
     current = target(state)
@@ -448,6 +451,8 @@ def clear_start_objects(target: AssociationTarget, state: Association) -> tuple[
     for group in sorted(state.groups, key=lambda g: (sum(len(target.tracklets[t]) for t in g), g)):
         assignment = [CLUTTER if t in group else a for t, a in enumerate(state.assignment)]
         candidate = Association.of(assignment)
+        if target.screen(state, candidate) < -screen_margin_nats:
+            continue
         value = target(candidate)
         if value > current:
             state, current = candidate, value

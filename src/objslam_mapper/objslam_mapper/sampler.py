@@ -149,6 +149,8 @@ class MoveStats:
     proposed: int = 0  # proposals that changed the state
     accepted: int = 0
     screened_out: int = 0  # rejected by the screen (delayed acceptance), target never computed
+    floor_passes: int = 0  # passed the screen only through its floor (the screen condemned them)
+    floor_accepted: int = 0  # ... and were accepted all the same
 
     @property
     def acceptance_rate(self) -> float:
@@ -188,6 +190,8 @@ class ChainResult:
             "acceptance_rates": {k: round(v, 4) for k, v in self.acceptance_rates.items()},
             "proposals": {k: s.proposed for k, s in self.moves.items()},
             "screened_out": {k: s.screened_out for k, s in self.moves.items()},
+            "floor_passes": {k: s.floor_passes for k, s in self.moves.items()},
+            "floor_accepted": {k: s.floor_accepted for k, s in self.moves.items()},
             "distinct_associations_visited": self.distinct_visited,
             "distinct_associations_kept": len(self.counts),
             "target_evaluations": self.target_evaluations,
@@ -284,6 +288,7 @@ class MetropolisHastings:
         if np.any(self.weights <= 0.0):
             raise SamplerError("tracklet weights must be positive")
         self.target = log_target if isinstance(log_target, CachedLogTarget) else CachedLogTarget(log_target)
+        self.passed_at_floor = False  # whether the last proposal through the screen passed only by its floor
         self.allow_clutter = allow_clutter
         probs = {kind: float(getattr(self.moves, kind)) for kind in MOVE_KINDS}
         if not allow_clutter:
@@ -520,6 +525,7 @@ class MetropolisHastings:
         log_first = self._first_stage(self.screen(state, new) + log_q)
         if not (log_first >= 0.0 or math.log(rng.random()) < log_first):
             return None
+        self.passed_at_floor = log_first <= self._log_screen_floor
         log_p_new = self.target(new)
         if log_p_new == -math.inf:
             return -math.inf
@@ -580,10 +586,13 @@ class MetropolisHastings:
                 kind = proposal.kind
                 stats[kind].proposed += 1
                 log_alpha = self._log_acceptance(view.state, log_p, proposal, rng)
+                if log_alpha is not None and self.screen is not None and self.passed_at_floor:
+                    stats[kind].floor_passes += 1
                 if log_alpha is None:
                     stats[kind].screened_out += 1
                 elif log_alpha >= 0.0 or math.log(rng.random()) < log_alpha:
                     stats[kind].accepted += 1
+                    stats[kind].floor_accepted += int(self.screen is not None and self.passed_at_floor)
                     view, log_p = proposal.view, self.target(proposal.view.state)
                     visited.add(view.state)
                     if on_move is not None:
