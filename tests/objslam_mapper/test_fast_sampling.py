@@ -49,8 +49,13 @@ def _state_noise(state, other, scale):
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("screen_error", "margins"),
-    [(0.0, (0.0, 0.0, 0.0)), (2.0, (0.0, 0.0, 0.0)), (2.0, (1.0, 0.3, 0.2))],
-    ids=["exact-screen", "poor-screen", "poor-screen-with-margins-and-floor"],
+    [
+        (0.0, (0.0, 0.0, 0.0, None)),
+        (2.0, (0.0, 0.0, 0.0, None)),
+        (2.0, (1.0, 0.3, 0.2, None)),
+        (4.0, (0, 0, 0.02, 0.3)),
+    ],
+    ids=["exact-screen", "poor-screen", "poor-screen-with-margins-and-floor", "bad-screen-with-a-join-floor"],
 )
 def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_error, margins):
     from objslam_mapper.association import CLUTTER, Association, enumerate_associations
@@ -76,6 +81,7 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
         screen_margin=margins[0],
         screen_relative_margin=margins[1],
         screen_floor=margins[2],
+        screen_join_floor=margins[3],
     )
     result = sampler.run(Association.of([CLUTTER] * 4), 50_000, 1000, np.random.default_rng(100), keep_trace=False)
     assert exact.total_variation(result.counts) < 0.05

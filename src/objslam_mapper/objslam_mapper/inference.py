@@ -136,7 +136,14 @@ class SamplerConfig:
     )
     screen_floor: float = setting(
         0.01,
-        "a proposal the screen condemns still gets a graph solve with this probability (loop closures)",
+        "a proposal the screen condemns still gets a graph solve with this probability",
+        minimum=1e-6,
+        maximum=1.0,
+    )
+    screen_join_floor: float = setting(
+        0.1,
+        "... this one when it joins tracklets of two objects (or of clutter and an object): loop closures "
+        "need the poses to move, which the screen cannot see",
         minimum=1e-6,
         maximum=1.0,
     )
@@ -504,6 +511,7 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         screen_margin=config.screen_margin_nats,
         screen_relative_margin=config.screen_relative_margin,
         screen_floor=config.screen_floor,
+        screen_join_floor=config.screen_join_floor,
     )
     start_clutter: set[int] = set()
     if config.initial_clutter and config.clutter.enabled:

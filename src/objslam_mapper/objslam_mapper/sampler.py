@@ -35,6 +35,9 @@ the whole trajectory) would otherwise make the second stage reject moves the tar
 loves, the floor because a screen can be wrong in kind (a loop closure needs the poses to
 move, which a screen with fixed poses cannot see): a proposal it condemns still reaches
 the target now and then, so the chain is never slower than plain MH by more than 1/floor.
+The floor may depend on the pair (J, J') as any first stage may: moves that join tracklets
+of different objects of J (or a clutter tracklet to an object), the only ones that can
+close a loop, get ``screen_join_floor``, the others the lower ``screen_floor``.
 
 Proposals are geometry aware when rough tracklet positions are given: merges and
 reassignments prefer nearby objects, splits separate tracklets that are far apart. The
@@ -273,14 +276,18 @@ class MetropolisHastings:
         screen_margin: float = 0.0,
         screen_relative_margin: float = 0.0,
         screen_floor: float = 0.0,
+        screen_join_floor: float | None = None,
     ):
         self.labels = list(labels)
         self.screen = screen
         self.screen_margin = screen_margin
         self.screen_relative_margin = screen_relative_margin
-        if not 0.0 <= screen_floor <= 1.0:
-            raise SamplerError(f"screen_floor must lie in [0, 1], got {screen_floor}")
+        join_floor = screen_floor if screen_join_floor is None else screen_join_floor
+        for name, value in (("screen_floor", screen_floor), ("screen_join_floor", join_floor)):
+            if not 0.0 <= value <= 1.0:
+                raise SamplerError(f"{name} must lie in [0, 1], got {value}")
         self._log_screen_floor = math.log(screen_floor) if screen_floor > 0.0 else -math.inf
+        self._log_join_floor = math.log(join_floor) if join_floor > 0.0 else -math.inf
         self.moves = moves or MoveConfig()
         n = len(self.labels)
         self.positions = np.zeros((n, 2)) if positions_xy_m is None else np.asarray(positions_xy_m, float).reshape(n, 2)
@@ -522,23 +529,34 @@ class MetropolisHastings:
         log_q = proposal.log_q_reverse - proposal.log_q_forward
         if self.screen is None:
             return self.target(new) - log_p + log_q
-        log_first = self._first_stage(self.screen(state, new) + log_q)
+        log_floor = self._log_floor(state, new)
+        log_first = self._first_stage(self.screen(state, new) + log_q, log_floor)
         if not (log_first >= 0.0 or math.log(rng.random()) < log_first):
             return None
-        self.passed_at_floor = log_first <= self._log_screen_floor
+        self.passed_at_floor = log_first <= log_floor
         log_p_new = self.target(new)
         if log_p_new == -math.inf:
             return -math.inf
-        log_back = self._first_stage(self.screen(new, state) - log_q)
+        log_back = self._first_stage(self.screen(new, state) - log_q, self._log_floor(new, state))
         return log_p_new - log_p + log_q + log_back - log_first
 
-    def _first_stage(self, log_ratio: float) -> float:
+    def _log_floor(self, state: Association, new: Association) -> float:
+        """The screen's floor for the move ``state -> new``: the join floor when an object of
+        ``new`` holds tracklets of two objects of ``state`` (or an object's and a clutter
+        tracklet): such a move may close a loop, which the screen cannot see."""
+        for group in new.groups:
+            owners = {state.assignment[t] if state.assignment[t] != CLUTTER else (CLUTTER, t) for t in group}
+            if len(owners) > 1:
+                return self._log_join_floor
+        return self._log_screen_floor
+
+    def _first_stage(self, log_ratio: float, log_floor: float) -> float:
         """log alpha_1 of a screen log ratio: loosened by the margins, clamped to [log floor, 0]."""
         if math.isfinite(log_ratio):
             log_ratio += max(self.screen_margin, self.screen_relative_margin * abs(log_ratio))
         elif math.isnan(log_ratio):
             log_ratio = -math.inf
-        return max(self._log_screen_floor, min(0.0, log_ratio))
+        return max(log_floor, min(0.0, log_ratio))
 
     def check_state(self, state: Association) -> None:
         if state.n_tracklets != len(self.labels):
