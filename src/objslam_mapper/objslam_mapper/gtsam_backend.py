@@ -508,26 +508,18 @@ def solve_gtsam(
     limit = cfg.max_iterations if max_iterations is None else max_iterations
     keys = GtsamKeys(problem.pose_count, layout.n_objects, problem.calibration_dim)
     values = keys.to_values(poses, objects, calib)
-    # As the fast solver: graduated caps sharing the iteration budget, each phase only while
-    # a slice is beyond its true cap; a solve cut short is scored under the true caps.
-    iterations, cap_scale = 0, 1.0
-    for phase, scale in enumerate(cap_schedule(problem, layout, poses, objects, warm_start is not None)):
+    # As the fast solver: graduated caps, each phase with the budget and only while a slice
+    # is beyond its true cap.
+    iterations = 0
+    for phase, cap_scale in enumerate(cap_schedule(problem, layout, poses, objects, warm_start is not None)):
         if phase and not count_outliers(problem, layout, *keys.from_values(values)):
             break
-        if iterations >= limit:
-            if cap_scale != 1.0:
-                graph, keys = _build(problem, layout, per_detection, window_poses, 1.0)
-                linearize = _Linearizer(graph, keys)
-                driven = _Driven(values, linearize(values), None, 0, False)
-            driven.converged = False
-            break
-        cap_scale = scale
         graph, keys = _build(problem, layout, per_detection, window_poses, cap_scale)
         linearize = _Linearizer(graph, keys)
         if drive == "python":
-            driven = _drive_python(linearize, values, cfg, limit - iterations)
+            driven = _drive_python(linearize, values, cfg, limit)
         else:
-            driven = _drive_optimizer(graph, linearize, values, cfg, limit - iterations)
+            driven = _drive_optimizer(graph, linearize, values, cfg, limit)
         values = driven.values
         iterations += driven.iterations
 
