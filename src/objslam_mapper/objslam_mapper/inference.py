@@ -1,48 +1,55 @@
 r"""Unknown data association end to end: tracklets -> MH over associations -> Algorithm 1.
 
-The target of the chain (paper eq. 25, extended with clutter) is, up to a constant,
+The target of the chain (paper eq. 25, extended with clutter and solid objects) is, up to
+a constant,
 
-    log P(J | Z) = log P(Z_obj | J) + sum over clutter tracklets tau of log L_clutter(tau)
-                   + log P(J),
+    log P(J | Z) = log P(Z | J) + sum over clutter tracklets tau of log w(tau)
+                   + log P(no two objects of J overlap | J, Z) + log P(J),
 
-where ``log P(Z_obj | J)`` is the factor graph's Laplace evidence of the objects J makes
-of its non-clutter tracklets (:func:`objslam_mapper.solver.solve`, every Gaussian
-normalizer included), ``L_clutter`` the false-alarm likelihood of
-:mod:`objslam_mapper.clutter` (a density over the same slice measurements, in the same
-units), and ``P(J)`` uniform, as in the paper: every association is a priori equally
-likely, and the Occam factor of each object in the evidence is what keeps objects from
-multiplying. Isolated detections dropped by the tracklet chaining are in no J.
+where ``log P(Z | J)`` is the Laplace evidence of J's factor graph
+(:func:`objslam_mapper.solver.solve`, every Gaussian normalizer included): its objects
+(one per group of tracklets, with its class priors) and its distractors (each clutter
+tracklet that a static thing of unknown shape explains, with broad priors;
+:mod:`objslam_mapper.clutter`). ``log w(tau)`` is the rest of a clutter tracklet's
+likelihood: the distractor component's weight, or, for a tracklet of independent false
+alarms (outside the graph), that weight times its uniform density. Each slice's factor
+is the max-mixture of :mod:`objslam_mapper.outliers` (a merged or cut blob costs a capped
+amount). The no-overlap term is :mod:`objslam_mapper.exclusion` (real objects do not
+share floor space; without it a blob merged with a neighbour becomes a duplicate beside
+the real object), and ``P(J)`` is uniform, as in the paper. Isolated detections dropped
+by the tracklet chaining are in no J.
 
 The chain starts from :func:`initial_association`: tracklets of a class seen close to
 each other join one object, except the tracklets that, alone with the odometry, the
-target prefers as clutter (``initial_clutter``: ``L_clutter(tau)`` above the evidence of
-``tau`` as a lone object, both without the rest of the map). Starting those in clutter
-matters beyond speed: a flat patch on the floor seen in several tracklets, merged into
-one object at the start, fits its class only with a height tens of prior stddevs off, yet
-taking it apart one tracklet at a time first loses (a merged object pays one Occam factor,
-its tracklets as clutter one distractor each), so a chain started there stays. It also
-gives the solves a trajectory not bent by posters fitted as objects. Only the start state
-changes: the target, and so the chain's exactness, do not.
+target prefers as clutter (``initial_clutter``); then :func:`clear_start_objects` moves to
+clutter each start object the target prefers there as a whole. A flat patch on the floor
+seen in several tracklets, merged into one object at the start, fits its class only with
+a height tens of prior stddevs off, yet taking it apart one tracklet at a time first
+loses, so a chain started there stays; the start clearing also gives the solves a
+trajectory not bent by posters fitted as objects. Only the start state changes: the
+target, and so the chain's exactness, do not.
 
 Each solve is warm-started from the chain's current state (a proposal differs from it by
-one move) and capped at ``proposal_max_iterations``: a hopeless proposal (a merge of
-objects metres apart) then costs a few iterations and is rejected on the evidence at its
-last iterate, which is below its optimum. Values are cached per state, so the chain
-sees one fixed target whatever path led to a state.
+one move) and capped at ``proposal_max_iterations`` per phase of the outlier caps: a
+hopeless proposal (a merge of objects metres apart) then costs a few iterations and is
+rejected on the evidence at its last iterate, which is below its optimum. Values are
+cached per state, so the chain sees one fixed target whatever path led to a state.
 
 Most proposals are hopeless (a few percent are accepted), so the chain screens them first
 (delayed acceptance, :mod:`objslam_mapper.sampler`) with :meth:`AssociationTarget.screen`:
 with the poses fixed at the current state's MAP the graph splits into one small problem
-per object (:mod:`objslam_mapper.conditional_evidence`), and the difference of two
-associations one move apart is the conditional evidence of the few objects the move
-changes, plus the exact clutter terms. Only a proposal that passes that screen costs a
-graph solve, and the second stage corrects for the screen, so the chain's target is still
-exactly ``log P(J | Z)`` above (the screen is loosened by ``screen_margin_nats`` and
-``screen_relative_margin`` and floored at ``screen_floor``: a loop closure needs the poses
-to move, which a screen at fixed poses cannot see). What stays approximate is what was
-already: each state's value is its solve's, cached, and the screen's reference poses are
-those of a state's first solve (cached for the last 1024 states; an evicted one is
-re-solved from the chain's current state, which agrees to the solver's tolerance).
+per object or distractor (:mod:`objslam_mapper.conditional_evidence`), and the difference
+of two associations one move apart is the conditional evidence of the few groups the
+move changes, plus the exact clutter terms and the no-overlap term at the fixed-pose
+objects. Only a proposal that passes that screen costs a graph solve, and the second
+stage corrects for the screen, so the chain's target is still exactly ``log P(J | Z)``
+above (the screen is loosened by ``screen_margin_nats`` and ``screen_relative_margin``
+and floored at ``screen_floor``, at ``screen_join_floor`` for moves that join two
+objects' tracklets: a loop closure needs the poses to move, which a screen at fixed poses
+cannot see). What stays approximate is what was already: each state's value is its
+solve's, cached, and the screen's reference poses are those of a state's first solve
+(cached for the last 1024 states; an evicted one is re-solved from the chain's current
+state, which agrees to the solver's tolerance).
 """
 
 from __future__ import annotations
