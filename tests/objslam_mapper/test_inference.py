@@ -10,6 +10,7 @@ import pytest
 from objslam_mapper.association import CLUTTER, Association, enumerate_associations
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.clutter import DISTRACTOR, INDEPENDENT, ClutterConfig, ClutterModel
+from objslam_mapper.detection import DetectionConfig
 from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.inference import (
     NO_OBJECT_LOG_EVIDENCE,
@@ -27,7 +28,8 @@ from objslam_mapper.tracklets import Tracklet, tracklets_of_problem
 
 from .association_scenes import GREEN, POSTER_FRAMES, RED_A, RED_B, problem_of, simulate, with_poster
 
-QUICK = SamplerConfig(samples=500, burn_in=150)
+# The scenes' slices come from within 3.5 m (association_scenes): the detector sees no farther.
+QUICK = SamplerConfig(samples=500, burn_in=150, detection=DetectionConfig(max_range_m=3.5))
 
 
 @pytest.fixture(scope="module")

@@ -22,9 +22,15 @@ objects share cancel in their offset, and this is what is left. Pairs whose gap 
 many standard deviations clear contribute nothing and are not evaluated.
 
 For two real objects 0.7 m apart the term is 0; for a duplicate 0.15 m from its original
-(location stddevs ~0.02 m) it is about -60 nats, which outweighs the few tens of nats the
-duplicate gains by absorbing a merged blob. Distractors (clutter tracklets explained by a
-static thing of unknown shape) are not in it: a poster may hang behind an object.
+(location stddevs ~0.02 m) it is hundreds of nats, far more than the 20-40 nats the
+duplicate gains by absorbing a merged blob. The prior holds with probability
+``1 - exp(floor)`` only (``sampler.exclusion_floor_nats``, -60): one object may stand on
+another, and a term without a floor is a wall the chain cannot cross. Out and back with
+drift, the start state can join the wrong tracklets (one object's outward tracklet with
+its neighbour's return), and every single move towards the truth first makes a duplicate;
+at -60 nats a pair, a duplicate still loses to a merge but the path stays open.
+Distractors (clutter tracklets explained by a static thing of unknown shape) are not in
+it: a poster may hang behind an object.
 """
 
 from __future__ import annotations
@@ -38,6 +44,8 @@ from scipy.special import log_ndtr
 from objslam_mapper.conditional_evidence import object_information
 from objslam_mapper.problem import GraphProblem
 
+# With this log probability (nats) a pair may overlap all the same (DEFAULT_FLOOR below).
+DEFAULT_FLOOR = -60.0
 # Pairs whose MAP footprints are this far apart (m) are not evaluated: with location
 # stddevs of centimetres, their term is 0 to many digits.
 _EVALUATED_GAP_M = 0.3
@@ -56,8 +64,9 @@ def pairs_log_probability(
     objects: NDArray[np.float64],
     covariances: dict[int, NDArray[np.float64]],
     pairs: tuple[NDArray[np.int64], NDArray[np.int64]],
+    floor: float = -np.inf,
 ) -> float:
-    """Sum over ``pairs`` of ``log Phi((D - g) / s)`` (module docstring).
+    """Sum over ``pairs`` of ``max(log Phi((D - g) / s), floor)`` (module docstring).
 
     ``objects`` (K, 5) as (x, y, z_base, diameter, height), ``covariances[k]`` the (5, 5)
     covariance of object k; a pair with an undetermined object (no finite variance) counts 0.
@@ -75,7 +84,7 @@ def pairs_log_probability(
         if not np.isfinite(var) or var <= 0.0:
             continue  # an object the model cannot place says nothing about overlap
         gap = 0.5 * (objects[a, 3] + objects[b, 3])
-        total += float(log_ndtr((dist - gap) / np.sqrt(var)))
+        total += max(float(log_ndtr((dist - gap) / np.sqrt(var))), floor)
     return total
 
 
@@ -85,8 +94,9 @@ def no_overlap_log_probability(
     objects: NDArray[np.float64],
     groups: Sequence[NDArray[np.int64]],
     priors: Sequence[int],
+    floor: float = DEFAULT_FLOOR,
 ) -> float:
-    """``log P(no two objects overlap | J, Z)`` (module docstring).
+    """``log P(no two objects overlap | J, Z)`` (module docstring), each pair's term at least ``floor``.
 
     ``objects`` (K, 5) are the MAP objects (x, y, z_base, diameter, height) of ``groups``
     (their measurement indices) with prior rows ``priors``, ``map_T_base`` the MAP poses;
@@ -100,4 +110,4 @@ def no_overlap_log_probability(
     for k in np.unique(np.concatenate(pairs)):
         info = object_information(problem, map_T_base, groups[k], objects[k], priors[k])
         covariances[int(k)] = np.full((5, 5), np.inf) if info is None else np.linalg.inv(info)
-    return pairs_log_probability(objects, covariances, pairs)
+    return pairs_log_probability(objects, covariances, pairs, floor)

@@ -70,6 +70,15 @@ from objslam_mapper.catalog import Catalog
 from objslam_mapper.clutter import DISTRACTOR, ClutterConfig, ClutterModel, Component
 from objslam_mapper.conditional_evidence import object_evidence
 from objslam_mapper.config import setting
+from objslam_mapper.detection import (
+    DetectionConfig,
+    Sight,
+    detection_log_likelihood,
+    miss_log_likelihood,
+    sight,
+    view_top_elevation,
+    visible,
+)
 from objslam_mapper.exclusion import no_overlap_log_probability
 from objslam_mapper.graph_config import GraphConfig
 from objslam_mapper.initialization import initial_object
@@ -127,6 +136,12 @@ class SamplerConfig:
     exclusion: bool = setting(
         True, "objects are solid: an association pays the posterior probability that two of its objects overlap"
     )
+    exclusion_floor_nats: float = setting(
+        -60.0,
+        "... each pair at most this much: with exp(floor) the prior does not hold (one object on another)",
+        maximum=0.0,
+    )
+    detection: DetectionConfig = setting(DetectionConfig(), "detection probability and visibility of objects")
     initial_clutter: bool = setting(
         True, "start state: a tracklet the target prefers as clutter over a lone object starts in clutter"
     )
@@ -178,9 +193,14 @@ class AssociationTarget:
         cache_size: int = 256,
         screen_iterations: int = 20,
         exclusion: bool = True,
+        detection: DetectionConfig | None = None,
+        exclusion_floor_nats: float = -60.0,
     ):
         self.clutter = ClutterModel(problem, clutter)
         self.exclusion = exclusion
+        self.exclusion_floor = exclusion_floor_nats
+        self.detection = detection or DetectionConfig(enabled=False)
+        self.view_top_rad = view_top_elevation(problem, self.detection)
         self.problem = self.clutter.problem  # with the distractors' prior rows
         self.tracklets = list(tracklets)
         self.max_iterations = max_iterations
@@ -192,6 +212,7 @@ class AssociationTarget:
         self._components: dict[int, Component] = {}
         # Per state: the poses and groups its screens are conditioned on (its MAP when first solved).
         self._references: OrderedDict[Association, tuple[NDArray, NDArray, NDArray]] = OrderedDict()
+        self._sights: OrderedDict[Association, Sight] = OrderedDict()
         self._group_evidence: OrderedDict[tuple[Association, GraphGroup], tuple[float, NDArray]] = OrderedDict()
         self.solves = 0
         self.solve_seconds = 0.0
@@ -281,14 +302,33 @@ class AssociationTarget:
         value = solution.log_evidence + self.clutter_log_likelihood(state)
         if self.exclusion and state.n_objects > 1 and np.isfinite(value):
             value += self.no_overlap_log_probability(state, solution)
+        if self.detection.enabled and np.isfinite(value):
+            value += self.detection_log_likelihood(state, solution)
         return value
+
+    def _object_states(self, state: Association, solution: GraphSolution) -> NDArray[np.float64]:
+        return np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects[: state.n_objects]])
+
+    def detection_log_likelihood(self, state: Association, solution: GraphSolution) -> float:
+        """The detection term of ``state``'s objects and distractors at its MAP (objslam_mapper.detection)."""
+        things = np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects])
+        return detection_log_likelihood(
+            self.problem,
+            solution.map_T_base,
+            things,
+            [self._measurements(g) for g in self.graph_groups(state)],
+            self.detection,
+            self.view_top_rad,
+        )
 
     def no_overlap_log_probability(self, state: Association, solution: GraphSolution) -> float:
         """log P(no two objects of ``state`` overlap) at its MAP (objslam_mapper.exclusion)."""
         members, rows = self._graph(state)
         k = state.n_objects
-        objects = np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects[:k]])
-        return no_overlap_log_probability(self.problem, solution.map_T_base, objects, members[:k], rows[:k])
+        objects = self._object_states(state, solution)
+        return no_overlap_log_probability(
+            self.problem, solution.map_T_base, objects, members[:k], rows[:k], self.exclusion_floor
+        )
 
     # ---- the screen (first stage of delayed acceptance) --------------------------------
     def _reference(self, state: Association) -> tuple[NDArray, NDArray, NDArray]:
@@ -353,9 +393,49 @@ class AssociationTarget:
             states = np.array([kept[g[1]] if g[1] in kept else self._conditional(state, g)[1] for g in groups])
             members = [self._measurements(g) for g in groups]
             rows = [self._prior_row(g, m) for g, m in zip(groups, members, strict=True)]
-            return no_overlap_log_probability(self.problem, poses, states, members, rows)
+            return no_overlap_log_probability(self.problem, poses, states, members, rows, self.exclusion_floor)
 
         return term(new) - term(state)
+
+    def _reference_sight(self, state: Association) -> Sight:
+        """How ``state``'s graph groups appear from its reference poses (cached with the reference)."""
+        cached = self._sights.get(state)
+        if cached is None:
+            poses, _, estimates = self._reference(state)
+            cached = sight(self.problem, poses, estimates, self.detection, self.view_top_rad)
+            self._sights[state] = cached
+            if len(self._sights) > _REFERENCE_CACHE_SIZE:
+                self._sights.popitem(last=False)
+        return cached
+
+    def _screen_detection(self, state: Association, new: Association) -> float:
+        """Change of the detection term from ``state`` to ``new`` over the groups the move
+        changes, at the screen's fixed poses and estimates (their effect on hiding the
+        others is left to the target)."""
+        poses = self._reference(state)[0]
+        old_groups = self.graph_groups(state)
+        reference = self._reference_sight(state)
+        new_groups = self.graph_groups(new)
+        lost = [k for k, g in enumerate(old_groups) if g not in set(new_groups)]
+        gained = [g for g in new_groups if g not in set(old_groups)]
+        kept = [k for k, g in enumerate(old_groups) if g in set(new_groups)]
+        value = 0.0
+        if lost:
+            shown = visible(reference.columns(lost), reference, self.detection)
+            value -= miss_log_likelihood(
+                self.problem, shown, [self._measurements(old_groups[k]) for k in lost], self.detection
+            )
+        if gained:
+            fresh = sight(
+                self.problem,
+                poses,
+                np.array([self._conditional(state, g)[1] for g in gained]),
+                self.detection,
+                self.view_top_rad,
+            )
+            shown = visible(fresh, Sight.join([reference.columns(kept), fresh]), self.detection)
+            value += miss_log_likelihood(self.problem, shown, [self._measurements(g) for g in gained], self.detection)
+        return value
 
     def screen(self, state: Association, new: Association) -> float:
         """Approximate ``log P(new|Z) - log P(state|Z)``: poses fixed at ``state``'s MAP.
@@ -373,6 +453,8 @@ class AssociationTarget:
         value += self.clutter_log_likelihood(new) - self.clutter_log_likelihood(state)
         if self.exclusion and np.isfinite(value):
             value += self._screen_no_overlap(state, new)
+        if self.detection.enabled and np.isfinite(value):
+            value += self._screen_detection(state, new)
         return float(value)
 
     def move_to(self, state: Association) -> None:
@@ -499,6 +581,8 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         max_iterations=config.proposal_max_iterations,
         cache_size=config.solution_cache_size,
         exclusion=config.exclusion,
+        detection=config.detection,
+        exclusion_floor_nats=config.exclusion_floor_nats,
     )
     if not chained.tracklets:
         logger.warning("no tracklets (every detection isolated): the map holds no objects")

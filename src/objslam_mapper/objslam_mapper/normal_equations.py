@@ -196,24 +196,32 @@ def cap_schedule(
 ) -> tuple[float, ...]:
     """The outlier caps' multipliers, phase by phase (objslam_mapper.outliers)."""
     if warm_start:
-        first = WARM_START_CAP_SCALES[0]
-        if count_outliers(problem, layout, poses, objects, first) <= WARM_START_MAX_BEYOND * len(layout.measurements):
+        beyond = beyond_cap(problem, layout, poses, objects, WARM_START_CAP_SCALES[0])
+        share = np.bincount(layout.object_of, weights=beyond, minlength=layout.n_objects) / np.maximum(
+            np.bincount(layout.object_of, minlength=layout.n_objects), 1
+        )
+        if not len(share) or share.max() <= WARM_START_MAX_BEYOND:
             return WARM_START_CAP_SCALES
     return COLD_START_CAP_SCALES
+
+
+def beyond_cap(
+    problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, cap_scale: float = 1.0
+) -> NDArray[np.bool_]:
+    """(A,) whether each slice of the association is beyond its outlier cost (times ``cap_scale``)."""
+    obj = objects[layout.object_of]
+    pred = predict_reduced(poses[layout.pose_of], obj[:, :3], obj[:, 3:], problem.mount, jacobians=False)
+    res = pred.values - problem.measurements[layout.measurements].T
+    res[BEARING] = wrap_angle(res[BEARING])
+    res /= problem.measurement_stddev[layout.measurements].T
+    return ~pred.valid | (half_chi2(res) > cap_scale * problem.measurement_outlier_cost[layout.measurements])
 
 
 def count_outliers(
     problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, cap_scale: float = 1.0
 ) -> int:
     """Slices of the association beyond their outlier cost (times ``cap_scale``) at this state."""
-    obj = objects[layout.object_of]
-    pred = predict_reduced(poses[layout.pose_of], obj[:, :3], obj[:, 3:], problem.mount, jacobians=False)
-    res = pred.values - problem.measurements[layout.measurements].T
-    res[BEARING] = wrap_angle(res[BEARING])
-    res /= problem.measurement_stddev[layout.measurements].T
-    if not np.all(pred.valid):
-        return len(res[0])
-    return int(np.count_nonzero(half_chi2(res) > cap_scale * problem.measurement_outlier_cost[layout.measurements]))
+    return int(np.count_nonzero(beyond_cap(problem, layout, poses, objects, cap_scale)))
 
 
 def graph_log_normalizer(problem: GraphProblem, layout: Layout) -> float:

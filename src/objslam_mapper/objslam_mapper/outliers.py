@@ -66,9 +66,10 @@ def inlier_log_weight(probability: float) -> float:
 # can leave the solve in that compromise.
 COLD_START_CAP_SCALES = (math.inf, 10.0, 1.0)
 WARM_START_CAP_SCALES = (100.0, 10.0, 1.0)
-# A warm start where more than this share of the slices is beyond even its raised caps is
-# no warm start (a move that changed much): the solve then starts Gaussian.
-WARM_START_MAX_BEYOND = 0.05
+# A warm start where more than this share of some object's slices is beyond even the
+# raised caps is no warm start for that object (a merge that closes a loop: half of it
+# was seen before the drift): the solve then starts Gaussian.
+WARM_START_MAX_BEYOND = 0.2
 
 
 def half_chi2(whitened: NDArray[np.float64]) -> NDArray[np.float64]:
