@@ -136,13 +136,15 @@ def visible(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[n
     """(N, R) whether each thing of ``rows`` is in view and hidden by no nearer one of ``occluders``
     (a thing does not hide itself: it is not nearer than itself)."""
     shown = rows.in_view.copy()
-    w = rows.width
-    for j in range(occluders.bearing.shape[1]):
-        offset = np.abs(wrap_angle(rows.bearing - occluders.bearing[:, j : j + 1]))
-        overlap = np.clip(0.5 * (w + occluders.width[:, j : j + 1]) - offset, 0.0, None)
-        cover = np.minimum(overlap, np.minimum(w, occluders.width[:, j : j + 1])) / np.maximum(w, 1e-12)
-        shown &= ~((occluders.range_m[:, j : j + 1] < rows.range_m) & (cover > config.occlusion_cover))
-    return shown
+    if not occluders.bearing.shape[1] or not shown.any():
+        return shown
+    # (N, R, M): the share of each row's bearing interval inside each occluder's.
+    w = rows.width[:, :, None]
+    w_occ = occluders.width[:, None, :]
+    offset = np.abs(wrap_angle(rows.bearing[:, :, None] - occluders.bearing[:, None, :]))
+    overlap = np.minimum(np.clip(0.5 * (w + w_occ) - offset, 0.0, None), np.minimum(w, w_occ))
+    hidden = (occluders.range_m[:, None, :] < rows.range_m[:, :, None]) & (overlap > config.occlusion_cover * w)
+    return shown & ~hidden.any(axis=2)
 
 
 def miss_log_likelihood(

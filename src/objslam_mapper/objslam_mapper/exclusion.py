@@ -95,15 +95,17 @@ def no_overlap_log_probability(
     groups: Sequence[NDArray[np.int64]],
     priors: Sequence[int],
     floor: float = DEFAULT_FLOOR,
+    pairs: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
 ) -> float:
-    """``log P(no two objects overlap | J, Z)`` (module docstring), each pair's term at least ``floor``.
+    """``log P(no two objects overlap | J, Z)`` (module docstring), each pair's term at least
+    ``floor``; over ``pairs`` (default: every pair near enough to matter).
 
     ``objects`` (K, 5) are the MAP objects (x, y, z_base, diameter, height) of ``groups``
     (their measurement indices) with prior rows ``priors``, ``map_T_base`` the MAP poses;
     each near object's covariance is its information's inverse with the poses held there.
     """
     objects = np.asarray(objects, dtype=float).reshape(-1, 5)
-    pairs = near_pairs(objects)
+    pairs = near_pairs(objects) if pairs is None else pairs
     if not len(pairs[0]):
         return 0.0
     covariances: dict[int, NDArray[np.float64]] = {}

@@ -79,7 +79,7 @@ from objslam_mapper.detection import (
     view_top_elevation,
     visible,
 )
-from objslam_mapper.exclusion import no_overlap_log_probability
+from objslam_mapper.exclusion import near_pairs, no_overlap_log_probability
 from objslam_mapper.graph_config import GraphConfig
 from objslam_mapper.initialization import initial_object
 from objslam_mapper.map_file import BuiltMap
@@ -382,20 +382,30 @@ class AssociationTarget:
 
     def _screen_no_overlap(self, state: Association, new: Association) -> float:
         """Change of the no-overlap term from ``state`` to ``new``, objects at the screen's
-        fixed-pose estimates (the reference's where ``new`` keeps an object)."""
+        fixed-pose estimates (the reference's where ``new`` keeps an object): only pairs
+        with an object the move changes differ."""
         poses, _, objects = self._reference(state)
         kept = {g: objects[k] for k, g in enumerate(state.groups)}
+        old, fresh = set(state.groups), set(new.groups)
 
-        def term(assoc: Association) -> float:
-            if assoc.n_objects < 2:
+        def term(assoc: Association, changed: set[tuple[int, ...]]) -> float:
+            if assoc.n_objects < 2 or not changed:
                 return 0.0
             groups = [(_OBJECT, g) for g in assoc.groups]
             states = np.array([kept[g[1]] if g[1] in kept else self._conditional(state, g)[1] for g in groups])
-            members = [self._measurements(g) for g in groups]
-            rows = [self._prior_row(g, m) for g, m in zip(groups, members, strict=True)]
-            return no_overlap_log_probability(self.problem, poses, states, members, rows, self.exclusion_floor)
+            i, j = near_pairs(states)
+            involved = np.array([groups[a][1] in changed or groups[b][1] in changed for a, b in zip(i, j, strict=True)])
+            if not involved.any():
+                return 0.0
+            pairs = (i[involved], j[involved])
+            needed = set(pairs[0].tolist()) | set(pairs[1].tolist())
+            members = [self._measurements(g) if k in needed else None for k, g in enumerate(groups)]
+            rows = [self._prior_row(g, m) if m is not None else -1 for g, m in zip(groups, members, strict=True)]
+            return no_overlap_log_probability(
+                self.problem, poses, states, members, rows, self.exclusion_floor, pairs=pairs
+            )
 
-        return term(new) - term(state)
+        return term(new, fresh - old) - term(state, old - fresh)
 
     def _reference_sight(self, state: Association) -> Sight:
         """How ``state``'s graph groups appear from its reference poses (cached with the reference)."""
