@@ -7,6 +7,8 @@ dropped on the way.
 
 from __future__ import annotations
 
+import json
+import subprocess
 import sys
 import textwrap
 import time
@@ -38,11 +40,24 @@ def _call(processes, *extra: str) -> tuple[int, dict]:
     return result.returncode, yaml.safe_load(result.stdout) if result.stdout else {}
 
 
-@pytest.fixture
-def mapper(processes, tmp_path):
-    proc = processes.start(objslam_cmd("mapper", "--ros-args", "-p", f"ros.output_dir:={tmp_path}"))
+def _start_mapper(processes, output_dir) -> subprocess.Popen:
+    proc = processes.start(objslam_cmd("mapper", "--ros-args", "-p", f"ros.output_dir:={output_dir}"))
     _wait_for_line(proc, "call /objslam/build_map")
     return proc
+
+
+@pytest.fixture
+def mapper(processes, tmp_path):
+    return _start_mapper(processes, tmp_path)
+
+
+def _stop(proc) -> str:
+    """Stop a node that must still be running; it must end cleanly on SIGTERM. Its stderr."""
+    assert proc.poll() is None, "the node died"
+    proc.terminate()
+    _out, err = proc.communicate(timeout=15)
+    assert "Traceback" not in err
+    return err
 
 
 def test_build_with_nothing_buffered_says_what_is_missing(processes, mapper):
@@ -131,16 +146,298 @@ BAD_ODOMETRY = textwrap.dedent(
 )
 
 
-def test_bad_inputs_are_counted_and_the_node_survives(processes, mapper):
+def test_bad_inputs_are_counted_and_the_node_survives(processes, mapper, start_driver):
     talker = processes.start([sys.executable, "-c", BAD_ODOMETRY])
     assert talker.stdout.readline().strip() == "done"
-    code, response = _call(processes)
-    assert code == 1 and response["success"] is False
+    response = start_driver()("build")["response"]  # the driver: `objslam call` cuts long messages
+    assert response["success"] is False
     assert "no slices received" in response["message"]  # the reset dropped the early slice array
-    assert mapper.poll() is None
-    mapper.terminate()
-    _out, err = mapper.communicate(timeout=15)
-    assert "odometry pose is not finite" in err
-    assert "not a unit quaternion" in err
+    # The refusal says what was rejected, with the counts: the NaN pose and the bad quaternion.
+    assert "2 invalid odometry messages" in response["message"]
+    assert "1 buffer resets" in response["message"]
+    err = _stop(mapper)
+    assert "rejected an odometry message (1 so far): odometry pose is not finite" in err
+    assert "rejected an odometry message (2 so far): odometry orientation is not a unit quaternion" in err
     assert "time jumped backwards" in err
-    assert "Traceback" not in err
+
+
+# A test's hands on the graph: one process for all its steps, since each rclpy process
+# costs seconds to start and discover. JSON commands in, one JSON answer per line out.
+DRIVER = textwrap.dedent(
+    """
+    import json, sys, time
+    import numpy as np
+    import rclpy
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from nav_msgs.msg import Odometry, Path
+    from std_srvs.srv import Trigger
+    from visualization_msgs.msg import MarkerArray
+    from objslam_msgs.msg import BuildProgress, ObjectMap, Slice, SliceArray
+    from objslam_msgs.srv import BuildMap
+    from objslam_mapper.catalog import load_catalog
+    from objslam_mapper.geometry import quaternion_from_yaw
+    from objslam_mapper.records import SliceMeasurement
+    from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
+
+    rclpy.init()
+    node = rclpy.create_node("mapper_test_driver")
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+    odom_pub = node.create_publisher(Odometry, "/odom", reliable)
+    slices_pub = node.create_publisher(SliceArray, "/objslam/slices", reliable)
+    build_client = node.create_client(BuildMap, "/objslam/build_map")
+    reset_client = node.create_client(Trigger, "/objslam/reset")
+    progress = []
+    node.create_subscription(BuildProgress, "/objslam/map/progress", progress.append, reliable)
+
+    def spin_until(done, timeout=60.0):
+        deadline = time.monotonic() + timeout
+        while not done():
+            if time.monotonic() > deadline:
+                raise TimeoutError("no answer in time")
+            rclpy.spin_once(node, timeout_sec=0.02)
+
+    def odometry(stamp_ns, x=0.0, y=0.0, theta=0.0):
+        msg = Odometry()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        msg.header.frame_id = "odom"
+        msg.pose.pose.position.x, msg.pose.pose.position.y = float(x), float(y)
+        q = msg.pose.pose.orientation
+        q.x, q.y, q.z, q.w = quaternion_from_yaw(theta)
+        return msg
+
+    def slice_array(stamp_ns, slices):
+        msg = SliceArray()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        msg.slices = [
+            Slice(label=s.label, confidence=1.0, bearing=s.bearing_rad, angular_width=s.angular_width_rad,
+                  elevation_bottom=s.elevation_bottom_rad, elevation_top=s.elevation_top_rad)
+            for s in slices
+        ]
+        return msg
+
+    def publish(odometry_msgs, slice_msgs):
+        for msg in odometry_msgs:
+            odom_pub.publish(msg)
+        for msg in slice_msgs:
+            slices_pub.publish(msg)
+        # Local and reliable, so delivered at once; this leaves the node time to take them all
+        # (waiting for the acknowledgements would cost a DDS heartbeat period, seconds).
+        time.sleep(0.5)
+        return {"odometry": len(odometry_msgs), "slices": len(slice_msgs)}
+
+    def run(start_sec=1.0):
+        # A red and a blue object seen from 40 poses on an ellipse: a map of two objects.
+        n = 40
+        objects = (SyntheticObject("red", (0.0, 0.0, 0.0), (0.3, 0.6)),
+                   SyntheticObject("blue", (3.0, 0.5, 0.0), (0.2, 0.9)))
+        stamps = [int(start_sec * 1e9) + k * 200_000_000 for k in range(n)]
+        sim = simulate_run(ellipse_trajectory(n, (2.0, 1.5)), stamps, objects, load_catalog(), np.random.default_rng(0))
+        return publish([odometry(o.stamp_ns, o.x_m, o.y_m, o.theta_rad) for o in sim.odometry],
+                       [slice_array(i.stamp_ns, i.slices) for i in sim.images])
+
+    def answer_of(client, future, timeout=30.0):
+        # An exception in a callback leaves a request unanswered (the multi-threaded executor
+        # keeps it in a future nobody reads); a node that died is gone: fail, do not hang.
+        spin_until(lambda: future.done() or not client.service_is_ready(), timeout)
+        if not future.done():
+            raise RuntimeError(f"{client.srv_name} went away without answering (did the node die?)")
+        return plain(future.result())
+
+    def plain(response):
+        return {f: getattr(response, f) for f in response.get_fields_and_field_types()}
+
+    def build(samples=0, burn_in=0, seed=0, second_while_running=False):
+        request = BuildMap.Request(samples=samples, burn_in=burn_in, seed=seed)
+        progress.clear()
+        started = time.monotonic()
+        first = build_client.call_async(request)
+        answer = {}
+        if second_while_running:
+            spin_until(lambda: progress or first.done())  # progress: the build has the lock
+            assert not first.done(), "the first build ended before the second call"
+            answer["second"] = answer_of(build_client, build_client.call_async(request))
+            answer["first_running_after_second"] = not first.done()
+        answer["response"] = answer_of(build_client, first)
+        answer["round_trip_sec"] = time.monotonic() - started
+        return answer
+
+    def reset():
+        return answer_of(reset_client, reset_client.call_async(Trigger.Request()))
+
+    def received_map():
+        # A late subscriber: new subscriptions, after the map was published.
+        got = {}
+        subs = [
+            node.create_subscription(t, topic, lambda m, k=k: got.setdefault(k, m), latched)
+            for k, t, topic in (("markers", MarkerArray, "/objslam/map/markers"),
+                                ("trajectory", Path, "/objslam/map/trajectory"),
+                                ("objects", ObjectMap, "/objslam/map/objects"))
+        ]
+        try:
+            spin_until(lambda: len(got) == 3, timeout=10.0)
+        finally:
+            for sub in subs:
+                node.destroy_subscription(sub)
+        markers = [
+            {"ns": m.ns, "type": m.type, "action": m.action, "alpha": m.color.a}
+            for m in got["markers"].markers
+        ]
+        path = got["trajectory"]
+        objects = got["objects"]
+        return {
+            "markers": markers,
+            "trajectory": {"frame_id": path.header.frame_id, "poses": len(path.poses)},
+            "objects": {"frame_id": objects.header.frame_id, "labels": sorted(o.label for o in objects.objects),
+                        "samples": objects.samples, "burn_in": objects.burn_in},
+        }
+
+    ops = {
+        "run": run,
+        "odometry": lambda stamps_sec: publish([odometry(s * 1e9) for s in stamps_sec], []),
+        "slices": lambda stamps_sec: publish(
+            [], [slice_array(s * 1e9, [SliceMeasurement("red", 1.0, 0.1, 0.1, -0.3, 0.1)]) for s in stamps_sec]
+        ),
+        "build": build,
+        "reset": reset,
+        "received_map": received_map,
+    }
+    for client in (build_client, reset_client):
+        assert client.wait_for_service(timeout_sec=20.0)
+    spin_until(lambda: odom_pub.get_subscription_count() and slices_pub.get_subscription_count(), 20.0)
+    spin_until(lambda: node.count_publishers("/objslam/map/progress"), 20.0)
+    print(json.dumps({"ready": True}), flush=True)
+    for line in sys.stdin:
+        command = json.loads(line)
+        try:
+            answer = ops[command.pop("op")](**command)
+        except Exception as exc:
+            answer = {"error": f"{type(exc).__name__}: {exc}"}
+        print(json.dumps(answer), flush=True)
+    """
+)
+
+
+class Driver:
+    def __init__(self, processes):
+        self.proc = processes.start([sys.executable, "-c", DRIVER], stdin=subprocess.PIPE)
+        assert self._answer() == {"ready": True}
+
+    def close(self) -> None:
+        # End of commands ends the driver (it reads stdin, so a SIGTERM alone would not).
+        if self.proc.stdin and not self.proc.stdin.closed:
+            self.proc.stdin.close()
+
+    def _answer(self) -> dict:
+        line = self.proc.stdout.readline()
+        if not line:
+            raise AssertionError(f"the test driver died: {self.proc.stderr.read()}")
+        return json.loads(line)
+
+    def __call__(self, op: str, **args) -> dict:
+        self.proc.stdin.write(json.dumps({"op": op, **args}) + "\n")
+        self.proc.stdin.flush()
+        answer = self._answer()
+        assert "error" not in answer, answer["error"]
+        return answer
+
+
+@pytest.fixture
+def start_driver(processes):
+    drivers: list[Driver] = []
+
+    def start() -> Driver:
+        drivers.append(Driver(processes))
+        return drivers[-1]
+
+    yield start
+    for d in drivers:
+        d.close()
+
+
+@pytest.fixture
+def driver(mapper, start_driver):
+    return start_driver()
+
+
+def _cylinders(received: dict) -> list[dict]:
+    return [m for m in received["markers"] if m["ns"] == "objects" and m["type"] == 3]
+
+
+def test_a_build_answers_with_its_time_and_count_refuses_a_second_and_latches_all_maps(mapper, driver):
+    assert driver("run") == {"odometry": 40, "slices": 40}
+    answer = driver("build", samples=1000, burn_in=200, seed=3, second_while_running=True)
+    second = answer["second"]
+    assert second["success"] is False
+    assert "a build is already running" in second["message"]
+    assert answer["first_running_after_second"]  # refused at once, not queued behind the build
+    response = answer["response"]
+    assert response["success"] is True, response["message"]
+    assert 0.0 < response["elapsed_sec"] <= answer["round_trip_sec"]
+    assert f"built a map of {response['object_count']} objects" in response["message"]
+    assert "from 40 images; no message was dropped" in response["message"]
+
+    # A late subscriber gets all three maps of this build (1000 samples), the count matching.
+    received = driver("received_map")
+    assert received["markers"][0]["action"] == 3  # DELETEALL
+    assert len(_cylinders(received)) == response["object_count"]
+    assert len(received["objects"]["labels"]) == response["object_count"]
+    assert received["trajectory"] == {"frame_id": "odom", "poses": 40}
+    assert {k: received["objects"][k] for k in ("frame_id", "samples", "burn_in")} == {
+        "frame_id": "odom",
+        "samples": 1000,
+        "burn_in": 200,
+    }
+
+    # Still answering after the refusal: the refused call did not leave the build lock taken.
+    assert driver("build", samples=50, burn_in=10)["response"]["success"] is True
+    _stop(mapper)
+
+
+def test_failed_builds_say_why_keep_the_node_and_the_previous_map(mapper, driver):
+    driver("run")
+    first = driver("build", samples=50, burn_in=10)["response"]
+    assert first["success"] is True, first["message"]
+    before = driver("received_map")
+
+    # A request that cannot run: the burn-in defaults to the parameter (2500).
+    bad = driver("build", samples=50)["response"]
+    assert bad["success"] is False
+    assert "invalid request: burn_in (2500) must be smaller than samples (50)" in bad["message"]
+
+    assert driver("reset") == {"success": True, "message": "buffers cleared"}
+    empty = driver("build", samples=50, burn_in=10)["response"]
+    assert empty["success"] is False and "nothing buffered yet" in empty["message"]
+
+    driver("slices", stamps_sec=[100, 101, 102])
+    no_odometry = driver("build", samples=50, burn_in=10)["response"]
+    assert no_odometry["success"] is False
+    assert "no odometry received (3 slice arrays are waiting for it)" in no_odometry["message"]
+
+    # Odometry that ends before every image: the build itself fails (odometry stopped?).
+    driver("odometry", stamps_sec=[10, 11, 12])
+    failed = driver("build", samples=60, burn_in=10)["response"]
+    assert failed["success"] is False
+    assert failed["message"].startswith("build failed: ")
+    assert "none of the 3 image stamps lies within the odometry span" in failed["message"]
+
+    assert driver("received_map") == before  # still the first map (50 samples, 40 poses)
+    assert before["objects"]["samples"] == 50 and before["trajectory"]["poses"] == 40
+    _stop(mapper)
+
+
+def test_an_unwritable_output_dir_still_publishes_the_map_and_says_so(processes, start_driver, tmp_path):
+    not_a_dir = tmp_path / "map-here"
+    not_a_dir.write_text("a file where the output folder should be\n")
+    mapper = _start_mapper(processes, not_a_dir)
+    driver = start_driver()
+    driver("run")
+    response = driver("build", samples=50, burn_in=10)["response"]
+    # The map was built: success, with a warning that names the file and the reason.
+    assert response["success"] is True, response["message"]
+    expected = f"WARNING: the map file was not written: cannot write map file {not_a_dir / 'map.yaml'}"
+    assert expected in response["message"]
+    assert len(_cylinders(driver("received_map"))) == response["object_count"]
+    assert not_a_dir.read_text() == "a file where the output folder should be\n"
+    err = _stop(mapper)
+    assert "the map file was not written" in err

@@ -7,9 +7,12 @@ from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
 from objslam_mapper.config import ConfigError
+
+SHUTDOWN_POLL_S = 0.5  # longest a shutdown by signal may go unnoticed
 
 
 def run_node(
@@ -25,15 +28,19 @@ def run_node(
         node = make_node()
         executor = make_executor()
         executor.add_node(node)
-        executor.spin()
+        # Not executor.spin(): rclpy's signal thread wakes the executor and only then shuts
+        # the context down, so a wait that starts in between never ends (seen as a node
+        # that now and then ignores SIGTERM until killed). A bounded wait looks again.
+        while executor.context.ok():
+            executor.spin_once(timeout_sec=SHUTDOWN_POLL_S)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ConfigError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
-    except rclpy.exceptions.RCLError:
-        # A signal shut the context down while a callback was publishing: that is a
-        # normal stop, not an error. Anything else is.
+    except _rclpy.RCLError:  # not in rclpy.exceptions: naming it there raised AttributeError here
+        # A signal shut the context down while the executor was waiting or a callback was
+        # publishing: that is a normal stop, not an error. Anything else is.
         if rclpy.ok():
             raise
     finally:
