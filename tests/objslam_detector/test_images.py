@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from objslam_detector import Detector, DetectorInputError, decode_compressed, image_from_buffer
+from objslam_detector.errors import CORRUPT_COMPRESSED, EMPTY_IMAGE, SIZE_MISMATCH, UNSUPPORTED_ENCODING
 from objslam_mapper.camera import DEFAULT_CAMERA
 from tests.objslam_detector.conftest import place, render, scene_of
 
@@ -19,20 +20,26 @@ def frame() -> np.ndarray:
 
 
 @pytest.mark.parametrize(
-    ("image", "encoding", "message"),
+    ("image", "encoding", "message", "reason"),
     [
-        (np.zeros((640, 640, 3), np.uint8), "yuv422", "unsupported image encoding 'yuv422'"),
-        (np.zeros((640, 640, 3), np.uint16), "rgb8", "must be 8-bit"),
-        (np.zeros((640, 640, 4), np.uint8), "rgb8", "does not hold rgb8 pixels"),
-        (np.zeros((640, 640), np.uint8), "bgr8", "does not hold bgr8 pixels"),
-        (np.zeros((0, 640, 3), np.uint8), "rgb8", "empty image"),
-        (np.zeros((480, 640, 3), np.uint8), "rgb8", "image is 640x480 px but the camera calibration is 640x640 px"),
+        (np.zeros((640, 640, 3), np.uint8), "yuv422", "unsupported image encoding 'yuv422'", UNSUPPORTED_ENCODING),
+        (np.zeros((640, 640, 3), np.uint16), "rgb8", "must be 8-bit", UNSUPPORTED_ENCODING),
+        (np.zeros((640, 640, 4), np.uint8), "rgb8", "does not hold rgb8 pixels", SIZE_MISMATCH),
+        (np.zeros((640, 640), np.uint8), "bgr8", "does not hold bgr8 pixels", SIZE_MISMATCH),
+        (np.zeros((0, 640, 3), np.uint8), "rgb8", "empty image", EMPTY_IMAGE),
+        (
+            np.zeros((480, 640, 3), np.uint8),
+            "rgb8",
+            "image is 640x480 px but the camera calibration is 640x640 px",
+            SIZE_MISMATCH,
+        ),
     ],
 )
-def test_unusable_images_raise_one_clear_error(image, encoding, message):
+def test_unusable_images_raise_one_clear_error(image, encoding, message, reason):
     with pytest.raises(DetectorInputError, match=message) as info:
         DETECTOR.detect(image, DEFAULT_CAMERA, encoding)
     assert "\n" not in str(info.value)
+    assert info.value.reason == reason  # what the node counts and rate-limits by
 
 
 def test_four_channel_encodings_are_accepted(frame):
@@ -56,8 +63,9 @@ def test_image_from_buffer_honours_row_padding(frame):
     [(100, 640 * 3, "image data holds 100 bytes"), (640 * 640 * 3, 100, "row step 100 is shorter")],
 )
 def test_image_from_buffer_refuses_inconsistent_messages(size, step, message):
-    with pytest.raises(DetectorInputError, match=message):
+    with pytest.raises(DetectorInputError, match=message) as info:
         image_from_buffer(bytes(size), 640, 640, "rgb8", step)
+    assert info.value.reason == SIZE_MISMATCH
 
 
 def test_png_decodes_exactly(frame):
@@ -86,17 +94,18 @@ def test_mono_png_decodes_as_mono8():
 
 
 @pytest.mark.parametrize(
-    ("data", "fmt", "message"),
+    ("data", "fmt", "message", "reason"),
     [
-        (b"\x89PNG\r\n\x1a\n" + b"\x00" * 40, "png", "cannot decode compressed image \\(png\\)"),
-        (b"not an image at all", "jpeg", "cannot decode compressed image \\(jpeg\\)"),
-        (b"", "png", "empty compressed image"),
-        (b"\x00" * 10, "tiff", "unsupported compressed format 'tiff'"),
+        (b"\x89PNG\r\n\x1a\n" + b"\x00" * 40, "png", "cannot decode compressed image \\(png\\)", CORRUPT_COMPRESSED),
+        (b"not an image at all", "jpeg", "cannot decode compressed image \\(jpeg\\)", CORRUPT_COMPRESSED),
+        (b"", "png", "empty compressed image", EMPTY_IMAGE),
+        (b"\x00" * 10, "tiff", "unsupported compressed format 'tiff'", UNSUPPORTED_ENCODING),
     ],
 )
-def test_corrupt_compressed_data_raises(data, fmt, message):
-    with pytest.raises(DetectorInputError, match=message):
+def test_corrupt_compressed_data_raises(data, fmt, message, reason):
+    with pytest.raises(DetectorInputError, match=message) as info:
         decode_compressed(data, fmt)
+    assert info.value.reason == reason
 
 
 def test_truncated_jpeg_is_refused_or_decodes_to_an_image(frame):

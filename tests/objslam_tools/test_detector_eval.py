@@ -5,11 +5,22 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
 import pytest
 
 from objslam_detector import DetectedSlice, Detector
+from objslam_mapper.camera import CameraMount
 from objslam_tools.cli import main
-from objslam_tools.detector_eval import EvalOptions, evaluate_bag, format_report, match
+from objslam_tools.detector_eval import (
+    DetectorEvaluation,
+    EvalOptions,
+    distractor_sector,
+    evaluate_bag,
+    format_report,
+    match,
+    score_frame,
+)
+from objslam_tools.ground_truth import Distractor, GroundTruth
 from objslam_tools.silhouette import VisibleObject
 from objslam_tools.sim import build_scenario, write_bag
 
@@ -58,3 +69,43 @@ def test_matching_pairs_neighbours_one_to_one_and_flags_duplicates():
     assigned, duplicate = match(slices, objects, EvalOptions())
     assert assigned == [1, 0, 0, None]
     assert duplicate == [False, False, True, False]
+
+
+def test_unmatched_detections_are_split_into_from_a_distractor_and_unexplained():
+    r = math.radians
+    height = CameraMount().height_m
+    # A red poster 3 m ahead, centred at camera height and facing the robot at the origin:
+    # it spans +-atan(0.3 / 3) = +-5.7 deg of azimuth and +-atan(0.2 / 3) = +-3.8 deg of elevation.
+    poster = Distractor(0, "poster", "red", (255, 0, 0), (3.0, 0.0, height), (0.6, 0.4), math.pi)
+    gt = GroundTruth(objects=(), distractors=(poster,))
+    distractors = [(poster, *distractor_sector(poster, gt, np.zeros(3)))]
+    objects = [view(0, 60.0)]
+
+    def sl(label: str, bearing_deg: float, bottom_deg: float = -3.8, top_deg: float = 3.8) -> DetectedSlice:
+        return DetectedSlice(label, 1.0, r(bearing_deg), r(11.4), r(bottom_deg), r(top_deg), 0, 0, 0, 0, 100)
+
+    evaluation = DetectorEvaluation(bag="by hand")
+    trouble = score_frame(
+        [
+            detection(60.0),  # the real object
+            sl("red", 0.5),  # the poster
+            sl("red", 25.0),  # beside the poster
+            sl("red", 0.0, 20.0, 30.0),  # above it
+            sl("blue", 0.0),  # on it, but the poster is not blue
+        ],
+        objects,
+        distractors,
+        evaluation,
+        EvalOptions(),
+    )
+    red, blue = evaluation.tallies["red"], evaluation.tallies["blue"]
+    assert (red.detections, red.by_object, red.from_distractor, red.unexplained) == (4, 1, 1, 2)
+    assert (blue.detections, blue.by_object, blue.from_distractor, blue.unexplained) == (1, 0, 0, 1)
+    assert trouble  # unexplained detections are trouble ...
+    overall = evaluation.to_dict()["overall"]
+    assert (overall["from_distractor"], overall["unexplained"]) == (1, 3)
+
+    alone = DetectorEvaluation(bag="by hand")
+    # ... detections from a distractor are not.
+    assert not score_frame([sl("red", 0.5)], [], distractors, alone, EvalOptions())
+    assert (alone.tallies["red"].from_distractor, alone.tallies["red"].unexplained) == (1, 0)

@@ -1,7 +1,7 @@
 """Turning what arrives on an image topic into a checked 8-bit colour array.
 
-Everything that cannot be used raises DetectorInputError with one reason: the node
-skips that frame, warns and counts it.
+Everything that cannot be used raises DetectorInputError with one reason (errors.py):
+the node skips that frame, warns and counts it.
 """
 
 from __future__ import annotations
@@ -12,7 +12,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_detector.errors import DetectorInputError
+from objslam_detector.errors import (
+    CORRUPT_COMPRESSED,
+    EMPTY_IMAGE,
+    SIZE_MISMATCH,
+    UNSUPPORTED_ENCODING,
+    DetectorInputError,
+)
 from objslam_mapper.camera import UnifiedCamera
 
 # encoding -> (channels, channel order of the colour planes)
@@ -39,18 +45,24 @@ def as_color_image(image: NDArray, encoding: str = "rgb8") -> ColorImage:
     Monochrome images are accepted but carry no colour, so no class matches them.
     """
     if encoding not in ENCODINGS:
-        raise DetectorInputError(f"unsupported image encoding {encoding!r} (supported: {', '.join(ENCODINGS)})")
+        raise DetectorInputError(
+            f"unsupported image encoding {encoding!r} (supported: {', '.join(ENCODINGS)})", reason=UNSUPPORTED_ENCODING
+        )
     image = np.asarray(image)
     if image.size == 0:
-        raise DetectorInputError(f"empty image (shape {image.shape})")
+        raise DetectorInputError(f"empty image (shape {image.shape})", reason=EMPTY_IMAGE)
     if image.dtype != np.uint8:
-        raise DetectorInputError(f"image must be 8-bit for {encoding}, got dtype {image.dtype}")
+        raise DetectorInputError(
+            f"image must be 8-bit for {encoding}, got dtype {image.dtype}", reason=UNSUPPORTED_ENCODING
+        )
     channels, order = ENCODINGS[encoding]
     shape_ok = image.ndim == 2 if channels == 1 else image.ndim == 3 and image.shape[2] == channels
     if channels == 1 and image.ndim == 3 and image.shape[2] == 1:
         image, shape_ok = image[:, :, 0], True
     if not shape_ok:
-        raise DetectorInputError(f"image of shape {image.shape} does not hold {encoding} pixels ({channels} channels)")
+        raise DetectorInputError(
+            f"image of shape {image.shape} does not hold {encoding} pixels ({channels} channels)", reason=SIZE_MISMATCH
+        )
     if channels == 1:
         return ColorImage(cv2.cvtColor(image, cv2.COLOR_GRAY2RGB), "rgb")
     if channels == 4:
@@ -63,7 +75,8 @@ def check_size(image: NDArray, camera: UnifiedCamera) -> None:
     height, width = image.shape[:2]
     if (width, height) != (camera.width_px, camera.height_px):
         raise DetectorInputError(
-            f"image is {width}x{height} px but the camera calibration is {camera.width_px}x{camera.height_px} px"
+            f"image is {width}x{height} px but the camera calibration is {camera.width_px}x{camera.height_px} px",
+            reason=SIZE_MISMATCH,
         )
 
 
@@ -72,16 +85,22 @@ def image_from_buffer(
 ) -> NDArray[np.uint8]:
     """View the ``data`` of a sensor_msgs/Image (``step`` bytes per row) as an array."""
     if encoding not in ENCODINGS:
-        raise DetectorInputError(f"unsupported image encoding {encoding!r} (supported: {', '.join(ENCODINGS)})")
+        raise DetectorInputError(
+            f"unsupported image encoding {encoding!r} (supported: {', '.join(ENCODINGS)})", reason=UNSUPPORTED_ENCODING
+        )
     if width <= 0 or height <= 0:
-        raise DetectorInputError(f"empty image ({width}x{height} px)")
+        raise DetectorInputError(f"empty image ({width}x{height} px)", reason=EMPTY_IMAGE)
     channels = ENCODINGS[encoding][0]
     if step < width * channels:
-        raise DetectorInputError(f"row step {step} is shorter than {width} px of {encoding} ({width * channels} bytes)")
+        raise DetectorInputError(
+            f"row step {step} is shorter than {width} px of {encoding} ({width * channels} bytes)",
+            reason=SIZE_MISMATCH,
+        )
     buffer = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.reshape(-1)
     if buffer.size < step * height:
         raise DetectorInputError(
-            f"image data holds {buffer.size} bytes, {width}x{height} {encoding} needs {step * height}"
+            f"image data holds {buffer.size} bytes, {width}x{height} {encoding} needs {step * height}",
+            reason=SIZE_MISMATCH,
         )
     rows = buffer[: step * height].reshape(height, step)[:, : width * channels]
     return rows.reshape(height, width, channels) if channels > 1 else rows
@@ -97,21 +116,27 @@ def decode_compressed(
     """
     fmt = compressed_format.lower()
     if fmt and not any(name in fmt for name in COMPRESSED_FORMATS):
-        raise DetectorInputError(f"unsupported compressed format {compressed_format!r} (supported: png, jpeg)")
+        raise DetectorInputError(
+            f"unsupported compressed format {compressed_format!r} (supported: png, jpeg)", reason=UNSUPPORTED_ENCODING
+        )
     what = compressed_format or "unknown format"
     buffer = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data.reshape(-1)
     if buffer.size == 0:
-        raise DetectorInputError("empty compressed image")
+        raise DetectorInputError("empty compressed image", reason=EMPTY_IMAGE)
     try:
         pixels = cv2.imdecode(buffer, cv2.IMREAD_UNCHANGED)
     except cv2.error as exc:
-        raise DetectorInputError(f"cannot decode compressed image ({what}): {exc}") from exc
+        raise DetectorInputError(f"cannot decode compressed image ({what}): {exc}", reason=CORRUPT_COMPRESSED) from exc
     if pixels is None or pixels.size == 0:
-        raise DetectorInputError(f"cannot decode compressed image ({what}): corrupt or truncated data")
+        raise DetectorInputError(
+            f"cannot decode compressed image ({what}): corrupt or truncated data", reason=CORRUPT_COMPRESSED
+        )
     if pixels.dtype != np.uint8:
-        raise DetectorInputError(f"compressed image decodes to {pixels.dtype}, need 8-bit")
+        raise DetectorInputError(f"compressed image decodes to {pixels.dtype}, need 8-bit", reason=UNSUPPORTED_ENCODING)
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     encoding = {1: "mono8", 3: "bgr8", 4: "bgra8"}.get(channels)
     if encoding is None:
-        raise DetectorInputError(f"compressed image decodes to {channels} channels, need 1, 3 or 4")
+        raise DetectorInputError(
+            f"compressed image decodes to {channels} channels, need 1, 3 or 4", reason=UNSUPPORTED_ENCODING
+        )
     return (pixels[:, :, 0] if pixels.ndim == 3 and channels == 1 else pixels), encoding

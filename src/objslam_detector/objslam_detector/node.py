@@ -2,12 +2,15 @@
 
 A thin wrapper over :class:`objslam_detector.detector.Detector`. A frame that cannot be
 used (unsupported encoding, size not matching the calibration, corrupt compressed data,
-no camera info yet: the latest few images are held until it comes) is skipped with a
-rate-limited warning saying why, and counted.
+empty image) is skipped with a warning saying why, at most one per reason every
+``WARN_PERIOD_S``, and counted per reason. Until the camera info comes the latest few
+images are held (one warning); older ones are counted as skipped for "no camera info".
+The counts are in :meth:`DetectorNode.summary`, printed at shutdown.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections import Counter, deque
@@ -35,6 +38,7 @@ SLICES_TOPIC = "/objslam/slices"
 DEBUG_IMAGE_TOPIC = "/objslam/detector/debug_image"
 WARN_PERIOD_S = 5.0
 PENDING_IMAGES = 10
+NO_CAMERA_INFO = "no camera info"  # beside the reasons of objslam_detector.errors
 
 
 def slice_to_msg(detected: DetectedSlice) -> Slice:
@@ -61,9 +65,9 @@ class DetectorNode(Node):
         self.detector = Detector(self.config, catalog)
         self.class_rgb = {c.label: c.color_rgb for c in catalog}
         self.camera: UnifiedCamera | None = None
-        self.skipped: Counter[str] = Counter()
+        self.skipped: Counter[str] = Counter()  # reason -> frames skipped
         self.processed = 0
-        self._last_warned: dict[str, float] = {}
+        self._last_warned: dict[str, float] = {}  # reason -> monotonic time of its last warning
         # Camera info and the first images arrive together, in an order the executor picks:
         # hold the latest few images until the calibration is known instead of losing them.
         self._pending: deque[tuple[Any, Callable[[], tuple[np.ndarray, str]]]] = deque()
@@ -110,17 +114,22 @@ class DetectorNode(Node):
         self._process(msg.header, lambda: decode_compressed(msg.data, msg.format))
 
     def summary(self) -> str:
-        skipped = f", skipped {dict(self.skipped)}" if self.skipped else ""
+        """E.g. ``processed 90 frames, skipped {'no camera info': 3, 'size mismatch': 5}``."""
+        skipped = f", skipped {dict(sorted(self.skipped.items()))}" if self.skipped else ""
         return f"processed {self.processed} frames{skipped}"
 
     def _skip(self, reason: str, detail: str) -> None:
         self.skipped[reason] += 1
-        total = sum(self.skipped.values())
-        # Rate-limited per reason, so a second, different problem is still reported at once.
+        # Rate-limited per reason, not per detail: details vary from frame to frame (sizes,
+        # byte counts) and would let a stream of bad frames warn for every one, while a
+        # second, different problem is still reported at once.
         now = time.monotonic()
-        if now - self._last_warned.get(detail, -WARN_PERIOD_S) >= WARN_PERIOD_S:
-            self._last_warned[detail] = now
-            self.get_logger().warn(f"skipped a frame ({total} so far): {detail}")
+        if now - self._last_warned.get(reason, -math.inf) >= WARN_PERIOD_S:
+            self._last_warned[reason] = now
+            self.get_logger().warn(
+                f"skipped a frame ({reason}: {self.skipped[reason]} so far, "
+                f"warning at most every {WARN_PERIOD_S:g} s): {detail}"
+            )
 
     def _process(self, header, decode) -> None:
         if self.camera is None:
@@ -131,14 +140,14 @@ class DetectorNode(Node):
             )
             if len(self._pending) == PENDING_IMAGES:
                 self._pending.popleft()
-                self.skipped["no camera info"] += 1
+                self.skipped[NO_CAMERA_INFO] += 1
             self._pending.append((header, decode))
             return
         try:
             image, encoding = decode()
             slices = self.detector.detect(image, self.camera, encoding)
         except DetectorInputError as exc:
-            self._skip("bad input", str(exc))
+            self._skip(exc.reason, str(exc))
             return
         self.processed += 1
         self.slices_pub.publish(SliceArray(header=header, slices=[slice_to_msg(s) for s in slices]))

@@ -53,5 +53,6 @@ def run_build_map(args: argparse.Namespace) -> int:
                 return NO_SERVICE_EXIT
             rclpy.spin_once(node, timeout_sec=0.1)
         response = future.result()
-    sys.stdout.write(yaml.safe_dump(message_to_plain(response), sort_keys=False))
+    # A response is a few fields, and its message says what went wrong: print it whole.
+    sys.stdout.write(yaml.safe_dump(message_to_plain(response, truncate_length=None), sort_keys=False))
     return 0 if response.success else 1

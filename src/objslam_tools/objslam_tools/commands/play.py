@@ -1,11 +1,15 @@
-"""``objslam play BAG``: publish a bag with its recorded timing and ``/clock``."""
+"""``objslam play BAG``: publish a bag with its recorded timing and ``/clock``.
+
+A whole bag without a camera image topic is refused as bad input: the pipeline would
+have nothing to detect in it. ``--topics`` plays chosen topics of any bag.
+"""
 
 from __future__ import annotations
 
 import argparse
 import logging
 
-from objslam_tools.bag import RawMessage, open_bag
+from objslam_tools.bag import COMPRESSED_IMAGE_TYPE, IMAGE_TYPE, Bag, RawMessage, open_bag
 from objslam_tools.errors import UserError
 from objslam_tools.player import PlayOptions, make_clock_publisher, play
 from objslam_tools.ros_util import import_message_type, ros_node
@@ -18,11 +22,25 @@ PUBLISHER_DEPTH = 1000
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("play", help="publish a bag's topics with recorded timing and /clock")
+    parser = subparsers.add_parser(
+        "play",
+        help="publish a bag's topics with recorded timing and /clock",
+        description=(
+            "Publish a bag's topics with their recorded timing, and /clock. Played whole, a bag must hold a "
+            "camera image topic (sensor_msgs/msg/Image or CompressedImage), since the detector needs one; "
+            "a bag without is refused. With --topics, only the listed topics must exist."
+        ),
+    )
     parser.add_argument("bag", help="rosbag2 directory (MCAP or sqlite3)")
     parser.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
     parser.add_argument("--loop", action="store_true", help="start again at the end (time jumps back)")
-    parser.add_argument("--topics", nargs="+", default=None, metavar="TOPIC", help="only these topics")
+    parser.add_argument(
+        "--topics",
+        nargs="+",
+        default=None,
+        metavar="TOPIC",
+        help="only these topics; each must be in the bag, and no image topic is required",
+    )
     parser.add_argument("--delay", type=float, default=1.0, metavar="S", help="wait S s before the first message")
     parser.add_argument("--clock-hz", type=float, default=100.0, help="/clock rate in wall Hz (0: with messages)")
     parser.set_defaults(func=run)
@@ -38,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
     if args.rate <= 0:
         raise UserError(f"--rate must be > 0, got {args.rate}")
     bag = open_bag(args.bag)
+    if args.topics is None:
+        _require_image_topic(bag)
     topics = args.topics or sorted(bag.topics)
     for topic in topics:
         bag.require_topic(topic)
@@ -75,3 +95,16 @@ def run(args: argparse.Namespace) -> int:
             return 0
         logger.info("published %d messages", count)
     return 0
+
+
+def _require_image_topic(bag: Bag) -> None:
+    """UserError unless the bag holds an image topic of either type.
+
+    Any name counts (like ``Bag.image_topic``, which ``objslam map`` uses), but several
+    are fine here: playing needs no choice between them, only something to see.
+    """
+    if not (bag.topics_of_type(IMAGE_TYPE) or bag.topics_of_type(COMPRESSED_IMAGE_TYPE)):
+        raise UserError(
+            f"bag {bag.path} has no camera image topic ({IMAGE_TYPE} or {COMPRESSED_IMAGE_TYPE}); "
+            "to play it anyway, name the topics with --topics"
+        )
