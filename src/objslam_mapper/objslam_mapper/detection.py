@@ -67,7 +67,7 @@ class DetectionConfig:
         0.035, "an object counts as in view only when its predicted width is at least this (rad)", minimum=0.0
     )
     max_range_m: float = setting(
-        5.0,
+        10.0,
         "... and no farther than this (m): beyond it a detector may lose small or dim objects for reasons "
         "this model does not know, and a real object must not pay for that",
         minimum=0.0,
