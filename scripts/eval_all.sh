@@ -4,6 +4,8 @@
 #   scripts/eval_all.sh                      # all five scenarios, all four associations
 #   SCENARIOS="small office" scripts/eval_all.sh
 #   ASSOCIATIONS="greedy none oracle" scripts/eval_all.sh
+#   SCENARIOS="office:7 loop:4" ASSOCIATIONS=sampler OUT=out/eval_seeds scripts/eval_all.sh
+#                                            # other seeds: bags rendered as out/bags/office_7, ...
 #
 # Renders the scenarios that are not bundled (twins, clutter, loop) into out/bags/ if
 # missing, builds each map with `objslam map --association A` at default settings
@@ -21,41 +23,42 @@ OUT="${OUT:-out/eval}"
 SCENARIOS="${SCENARIOS:-small office twins clutter loop}"
 ASSOCIATIONS="${ASSOCIATIONS:-sampler greedy none oracle}"
 
+# A scenario is NAME (the bundled bag, or seed 1) or NAME:SEED (rendered with that seed).
 bag_of() {
   case "$1" in
     small | office) echo "bags/$1" ;;
+    *:*) echo "out/bags/${1%%:*}_${1##*:}" ;;
     *) echo "out/bags/$1" ;;
   esac
 }
 
-# The scenarios not bundled, rendered exactly so (same scenario and seed: byte-identical bag).
+# The bags not bundled, rendered exactly so (same scenario and seed: byte-identical bag).
 render() {
-  local bag
+  local bag name seed
   bag="$(bag_of "$1")"
   [ -d "$bag" ] && return 0
   mkdir -p "$(dirname "$bag")"
-  case "$1" in
-    twins) objslam sim twins --out "$bag" --seed 1 --compressed ;;
-    clutter) objslam sim clutter --out "$bag" --seed 1 --compressed ;;
-    loop) objslam sim loop --out "$bag" --seed 1 --compressed ;;
-    *) echo "eval_all: no bag for scenario $1 at $bag" >&2 && return 1 ;;
-  esac
+  name="${1%%:*}"
+  seed=1
+  case "$1" in *:*) seed="${1##*:}" ;; esac
+  objslam sim "$name" --out "$bag" --seed "$seed" --compressed
 }
 
 jsons=()
 for scenario in $SCENARIOS; do
   render "$scenario"
   bag="$(bag_of "$scenario")"
-  mkdir -p "$OUT/$scenario"
+  dir="$OUT/${scenario/:/_}"
+  mkdir -p "$dir"
   maps=()
   labels=()
   for association in $ASSOCIATIONS; do
-    map="$OUT/$scenario/$association.yaml"
+    map="$dir/$association.yaml"
     if [ ! -f "$map" ]; then
       echo "eval_all: $scenario / $association ..." >&2
       start=$(date +%s)
-      objslam map "$bag" --out "$map" --association "$association" >"$OUT/$scenario/$association.log" 2>&1 || {
-        echo "eval_all: objslam map failed, see $OUT/$scenario/$association.log" >&2
+      objslam map "$bag" --out "$map" --association "$association" >"$dir/$association.log" 2>&1 || {
+        echo "eval_all: objslam map failed, see $dir/$association.log" >&2
         exit 1
       }
       echo "eval_all: $scenario / $association done in $(($(date +%s) - start)) s" >&2
@@ -65,9 +68,9 @@ for scenario in $SCENARIOS; do
   done
   echo
   echo "### $scenario"
-  objslam eval "${maps[@]}" --bag "$bag" --label "${labels[@]}" | tee "$OUT/$scenario/eval.txt"
-  objslam eval "${maps[@]}" --bag "$bag" --label "${labels[@]}" --json >"$OUT/$scenario/eval.json"
-  jsons+=("$OUT/$scenario/eval.json")
+  objslam eval "${maps[@]}" --bag "$bag" --label "${labels[@]}" | tee "$dir/eval.txt"
+  objslam eval "${maps[@]}" --bag "$bag" --label "${labels[@]}" --json >"$dir/eval.json"
+  jsons+=("$dir/eval.json")
 done
 
 echo
