@@ -17,7 +17,9 @@ import pytest
 import yaml
 
 from objslam_mapper.map_file import read_map
-from tests.conftest import BAGS, objslam_cmd
+from tests.conftest import BAGS, REPO, objslam_cmd
+
+CONFIG_DIR = REPO / "config"
 
 pytestmark = pytest.mark.ros
 
@@ -68,8 +70,21 @@ def test_build_with_nothing_buffered_says_what_is_missing(processes, mapper):
     assert mapper.poll() is None
 
 
-def test_bag_through_the_nodes_gives_the_one_process_map(processes, mapper, tmp_path):
-    processes.start(objslam_cmd("detector", "--ros-args", "-p", "use_compressed:=true", "-p", "reliable_images:=true"))
+def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path):
+    # As a user runs them (README walk-through): parameter files, and the bag's /clock as time.
+    mapper = processes.start(
+        objslam_cmd(
+            "mapper", "--ros-args", "--params-file", str(CONFIG_DIR / "mapper.yaml"),
+            "-p", "use_sim_time:=true", "-p", f"ros.output_dir:={tmp_path}",
+        )
+    )  # fmt: skip
+    _wait_for_line(mapper, "call /objslam/build_map")
+    processes.start(
+        objslam_cmd(
+            "detector", "--ros-args", "--params-file", str(CONFIG_DIR / "detector.yaml"),
+            "-p", "use_compressed:=true", "-p", "reliable_images:=true", "-p", "use_sim_time:=true",
+        )
+    )  # fmt: skip
     time.sleep(3.0)  # discovery before the first message, so nothing is lost
     player = processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "2.0", "--rate", "1.0"))
     assert player.wait(timeout=120) == 0
