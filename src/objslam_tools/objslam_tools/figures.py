@@ -50,6 +50,14 @@ def _rgb(catalog: Catalog | None, label: str) -> tuple[float, float, float]:
     return (rgb[0] / 255.0, rgb[1] / 255.0, rgb[2] / 255.0)
 
 
+_REJECTED_ELLIPSE_MAX_STDDEV_M = 0.3  # the default spurious-object threshold
+
+
+def _largest_stddev(cov_xy: NDArray[np.float64]) -> float:
+    values = np.linalg.eigvalsh(0.5 * (cov_xy + cov_xy.T)) if np.all(np.isfinite(cov_xy)) else [np.inf]
+    return float(np.sqrt(max(float(np.max(values)), 0.0)))
+
+
 def _ellipse(xy: NDArray[np.float64], cov_xy: NDArray[np.float64], sigmas: float = 2.0) -> Ellipse | None:
     """The ``sigmas``-sigma ellipse of a 2x2 covariance, None if it is degenerate."""
     cov = 0.5 * (cov_xy + cov_xy.T)
@@ -134,8 +142,11 @@ def top_down_figure(
         )  # fmt: skip
         if rejected:
             ax.plot(*xy, "x", color="k", markersize=7, markeredgewidth=1.3, zorder=6)
-        ellipse = _ellipse(xy, np.asarray(obj.position_covariance, dtype=float)[:2, :2])
-        if ellipse is not None:
+        cov_xy = np.asarray(obj.position_covariance, dtype=float)[:2, :2]
+        # A rejected identity is often spurious (metres of uncertainty): its ellipse would only
+        # hide the map. Mapped objects always get theirs.
+        ellipse = _ellipse(xy, cov_xy)
+        if ellipse is not None and not (rejected and _largest_stddev(cov_xy) > _REJECTED_ELLIPSE_MAX_STDDEV_M):
             ellipse.set_zorder(5)
             ax.add_patch(ellipse)
         if not rejected:  # rejected identities often pile up where one real object is: their labels would hide it
@@ -143,7 +154,8 @@ def top_down_figure(
                 f"{obj.id} P={obj.existence_probability:.2f}", tuple(xy), xytext=(6, 6),
                 textcoords="offset points", fontsize=7, color="0.1", zorder=7,
             )  # fmt: skip
-        points.append(xy[None, :] + np.array([[-radius, -radius], [radius, radius]]))
+        if not rejected:  # far-off rejected identities would shrink the map to a corner of the picture
+            points.append(xy[None, :] + np.array([[-radius, -radius], [radius, radius]]))
 
     for obj in built_map.rejected:
         draw(obj, rejected=True)
