@@ -19,6 +19,7 @@ logger = logging.getLogger(__name__)
 # Reliable delivery still loses what falls out of the publisher's history while a busy
 # subscriber lags; 1000 messages is 10 s of odometry at 100 Hz.
 PUBLISHER_DEPTH = 1000
+ACK_TIMEOUT_S = 5.0  # at the end, how long to wait for subscribers to acknowledge the last messages
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     import rclpy
+    from rclpy.duration import Duration
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile
 
@@ -91,6 +93,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             time.sleep(options.delay_s)  # let subscribers discover the publishers first
             count = play(messages, publish, publish_clock, options, keep_going=rclpy.ok)
+            # Leaving at once would drop what reliable subscribers have not acknowledged yet
+            # (the bag's last messages), as `ros2 bag play --wait-for-all-acked` avoids.
+            for publisher in publishers.values():
+                publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
         except (KeyboardInterrupt, ExternalShutdownException):
             return 0
         logger.info("published %d messages", count)
