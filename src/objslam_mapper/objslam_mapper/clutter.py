@@ -28,7 +28,7 @@ a static distractor (weight ``distractor_weight``)
     (``distractor_z_base_stddev_m``, ``distractor_size_stddev_m``) instead of the class
     priors. A distractor is a thing in the world like an object, so it is part of the
     factor graph: each distractor tracklet of the clutter set is one more variable of the
-    association's graph, with those priors (:meth:`ClutterModel.graph_groups`), and its
+    association's graph, with those priors (:meth:`objslam_mapper.inference.AssociationTarget.graph_groups`), and its
     ``log L`` is what it adds to the graph's Laplace evidence, plus ``log w``. It thus
     gets the trajectory the whole map pins down, as an object does: a tracklet's slices
     fit the map's trajectory better than the odometry alone (on the ``clutter`` scenario

@@ -61,7 +61,6 @@ class _ObjectSystem:
         self.outlier_cost = problem.measurement_outlier_cost[group]
         self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
         self.cap_scale = 1.0  # as AssociationSystem.cap_scale
-        self.outliers = 0  # slices beyond their true cap at the last linearization
         self.prior_mean = problem.prior_mean[row]
         self.prior_inv_sigma = 1.0 / problem.prior_stddev[row]
         self.mount = problem.mount
@@ -69,16 +68,17 @@ class _ObjectSystem:
             problem.prior_log_normalizer[row]
         )
 
-    def linearize(self, state: NDArray[np.float64]) -> tuple[float, NDArray | None, NDArray | None]:
-        """(cost, gradient, Gauss-Newton information); cost inf where the model is undefined."""
+    def linearize(self, state: NDArray[np.float64]) -> tuple[float, NDArray | None, NDArray | None, int]:
+        """(cost, gradient, Gauss-Newton information, slices beyond their true cap); cost inf
+        where the model is undefined."""
         pred = predict_reduced(self.poses, state[:3], state[3:], self.mount)
         if not np.all(pred.valid):
-            return math.inf, None, None
+            return math.inf, None, None, len(self.z[0])
         res = pred.values - self.z
         res[BEARING] = wrap_angle(res[BEARING])
         res *= self.inv_sigma
         half = half_chi2(res)
-        self.outliers = int(np.count_nonzero(half > self.outlier_cost))
+        outliers = int(np.count_nonzero(half > self.outlier_cost))
         weight = self.inv_sigma
         if self.has_outlier_model and self.cap_scale < np.inf:
             weight = weight * truncate(res, self.outlier_cost * self.cap_scale, half)
@@ -89,7 +89,7 @@ class _ObjectSystem:
         info = flat @ flat.T
         info[np.diag_indices(OBJECT_DIM)] += self.prior_inv_sigma**2
         grad = flat @ res.ravel() + prior * self.prior_inv_sigma
-        return cost, grad, info
+        return cost, grad, info, outliers
 
 
 def object_information(
@@ -124,18 +124,18 @@ def object_evidence(
     """
     system = _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64), prior)
     state = np.array(start, dtype=float)
-    if system.linearize(state)[1] is None:
-        return ObjectEvidence(-math.inf, state, 0, False)
     tolerances = (absolute_tolerance, relative_tolerance)
     # As solver.solve from a warm start: the poses are a MAP's, the start near the object.
-    iterations, converged = 0, False
+    iterations, converged, outliers = 0, False, 0
     for phase, scale in enumerate(WARM_START_CAP_SCALES):
-        if phase:
-            system.linearize(state)  # counts the slices beyond their true cap where the last phase ended
-            if not (system.has_outlier_model and system.outliers):
-                break
+        if phase and not (system.has_outlier_model and outliers):
+            break
         system.cap_scale = scale
-        state, cost, _, info, more, converged = _minimize(system, state, max_iterations, tolerances)
+        linearized = system.linearize(state)
+        if linearized[1] is None:
+            return ObjectEvidence(-math.inf, state, 0, False)
+        state, linearized, more, converged = _minimize(system, state, linearized, max_iterations, tolerances)
+        cost, _, info, outliers = linearized
         iterations += more
     sign, log_det = np.linalg.slogdet(info)
     if sign <= 0.0:
@@ -145,11 +145,16 @@ def object_evidence(
 
 
 def _minimize(
-    system: _ObjectSystem, state: NDArray[np.float64], max_iterations: int, tolerances: tuple[float, float]
-) -> tuple[NDArray[np.float64], float, NDArray, NDArray, int, bool]:
-    """Levenberg-Marquardt from a valid ``state``: (state, cost, gradient, information, linearizations, converged)."""
+    system: _ObjectSystem,
+    state: NDArray[np.float64],
+    linearized: tuple[float, NDArray, NDArray, int],
+    max_iterations: int,
+    tolerances: tuple[float, float],
+) -> tuple[NDArray[np.float64], tuple[float, NDArray, NDArray, int], int, bool]:
+    """Levenberg-Marquardt from a valid ``state`` and its ``linearized`` (as
+    ``_ObjectSystem.linearize``): (state, its linearization, linearizations, converged)."""
     absolute_tolerance, relative_tolerance = tolerances
-    cost, grad, info = system.linearize(state)
+    cost, grad, info, _ = linearized
     damping, iterations, converged = 0.0, 1, False
     while iterations < max_iterations:
         damped = info + damping * np.diag(np.diag(info))
@@ -165,13 +170,14 @@ def _minimize(
             converged = True
             break
         new_state = state + step
-        new_cost, new_grad, new_info = system.linearize(new_state)
+        new = system.linearize(new_state)
         iterations += 1
-        if new_grad is not None and new_cost <= cost:
-            state, cost, grad, info = new_state, new_cost, new_grad, new_info
+        if new[1] is not None and new[0] <= cost:
+            state, linearized = new_state, new
+            cost, grad, info, _ = new
             damping = 0.0 if damping < 1e-3 else damping / 10.0
         else:
             damping = max(1e-4, 10.0 * damping)
             if damping > _MAX_LAMBDA:
                 break
-    return state, cost, grad, info, iterations, converged
+    return state, linearized, iterations, converged

@@ -180,6 +180,11 @@ GraphGroup = tuple[str, tuple[int, ...]]
 _OBJECT = "object"
 
 
+def _estimates(solution: GraphSolution, count: int | None = None) -> NDArray[np.float64]:
+    """(G, 5) (x, y, z_base, diameter, height) of the solution's first ``count`` groups (default all)."""
+    return np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects[:count]]).reshape(-1, 5)
+
+
 class AssociationTarget:
     """``log P(J|Z)`` of associations of ``tracklets`` (see the module docstring); callable."""
 
@@ -254,8 +259,9 @@ class AssociationTarget:
 
     def _graph(self, state: Association) -> tuple[list[NDArray[np.int64]], list[int]]:
         """Measurements and prior rows of every group of ``state``'s graph."""
-        members = [self._measurements(g) for g in self.graph_groups(state)]
-        rows = [self._prior_row(g, m) for g, m in zip(self.graph_groups(state), members, strict=True)]
+        groups = self.graph_groups(state)
+        members = [self._measurements(g) for g in groups]
+        rows = [self._prior_row(g, m) for g, m in zip(groups, members, strict=True)]
         return members, rows
 
     def tracklet_clutter_log_likelihood(self, t: int) -> float:
@@ -306,16 +312,12 @@ class AssociationTarget:
             value += self.detection_log_likelihood(state, solution)
         return value
 
-    def _object_states(self, state: Association, solution: GraphSolution) -> NDArray[np.float64]:
-        return np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects[: state.n_objects]])
-
     def detection_log_likelihood(self, state: Association, solution: GraphSolution) -> float:
         """The detection term of ``state``'s objects and distractors at its MAP (objslam_mapper.detection)."""
-        things = np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects])
         return detection_log_likelihood(
             self.problem,
             solution.map_T_base,
-            things,
+            _estimates(solution),
             [self._measurements(g) for g in self.graph_groups(state)],
             self.detection,
             self.view_top_rad,
@@ -323,11 +325,15 @@ class AssociationTarget:
 
     def no_overlap_log_probability(self, state: Association, solution: GraphSolution) -> float:
         """log P(no two objects of ``state`` overlap) at its MAP (objslam_mapper.exclusion)."""
-        members, rows = self._graph(state)
-        k = state.n_objects
-        objects = self._object_states(state, solution)
+        members = self.groups(state)
+        rows = [int(self.problem.measurement_label[m[0]]) for m in members]
         return no_overlap_log_probability(
-            self.problem, solution.map_T_base, objects, members[:k], rows[:k], self.exclusion_floor
+            self.problem,
+            solution.map_T_base,
+            _estimates(solution, state.n_objects),
+            members,
+            rows,
+            self.exclusion_floor,
         )
 
     # ---- the screen (first stage of delayed acceptance) --------------------------------
@@ -342,8 +348,7 @@ class AssociationTarget:
             reference = (np.asarray(self.problem.odometry_poses), owners, np.zeros((0, 5)))
         else:
             sol = self.solution(state)
-            objects = np.array([np.concatenate([o.location_m, o.size_m]) for o in sol.objects])
-            reference = (np.asarray(sol.map_T_base), sol.object_of_measurement, objects)
+            reference = (np.asarray(sol.map_T_base), sol.object_of_measurement, _estimates(sol))
         self._references[state] = reference
         if len(self._references) > _REFERENCE_CACHE_SIZE:
             self._references.popitem(last=False)
@@ -418,17 +423,18 @@ class AssociationTarget:
                 self._sights.popitem(last=False)
         return cached
 
-    def _screen_detection(self, state: Association, new: Association) -> float:
-        """Change of the detection term from ``state`` to ``new`` over the groups the move
-        changes, at the screen's fixed poses and estimates (their effect on hiding the
-        others is left to the target)."""
+    def _screen_detection(
+        self, state: Association, old_groups: list[GraphGroup], new_groups: list[GraphGroup]
+    ) -> float:
+        """Change of the detection term from ``state`` (graph groups ``old_groups``) to the
+        association of ``new_groups`` over the groups the move changes, at the screen's
+        fixed poses and estimates (their effect on hiding the others is left to the target)."""
         poses = self._reference(state)[0]
-        old_groups = self.graph_groups(state)
         reference = self._reference_sight(state)
-        new_groups = self.graph_groups(new)
-        lost = [k for k, g in enumerate(old_groups) if g not in set(new_groups)]
-        gained = [g for g in new_groups if g not in set(old_groups)]
-        kept = [k for k, g in enumerate(old_groups) if g in set(new_groups)]
+        old_set, new_set = set(old_groups), set(new_groups)
+        lost = [k for k, g in enumerate(old_groups) if g not in new_set]
+        gained = [g for g in new_groups if g not in old_set]
+        kept = [k for k, g in enumerate(old_groups) if g in new_set]
         value = 0.0
         if lost:
             shown = visible(reference.columns(lost), reference, self.detection)
@@ -456,7 +462,8 @@ class AssociationTarget:
         fixed-pose objects. A fixed function of the pair (cached), as delayed acceptance needs.
         """
         self.screens += 1
-        old_groups, new_groups = set(self.graph_groups(state)), set(self.graph_groups(new))
+        old_list, new_list = self.graph_groups(state), self.graph_groups(new)
+        old_groups, new_groups = set(old_list), set(new_list)
         gained = sum(self._conditional(state, g)[0] for g in new_groups - old_groups)
         lost = sum(self._conditional(state, g)[0] for g in old_groups - new_groups)
         value = gained - lost if np.isfinite(lost) else -np.inf
@@ -464,7 +471,7 @@ class AssociationTarget:
         if self.exclusion and np.isfinite(value):
             value += self._screen_no_overlap(state, new)
         if self.detection.enabled and np.isfinite(value):
-            value += self._screen_detection(state, new)
+            value += self._screen_detection(state, old_list, new_list)
         return float(value)
 
     def move_to(self, state: Association) -> None:
@@ -614,13 +621,14 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
         screen_floor=config.screen_floor,
         screen_join_floor=config.screen_join_floor,
     )
+    start_in_clutter = config.initial_clutter and config.clutter.enabled
     start_clutter: set[int] = set()
-    if config.initial_clutter and config.clutter.enabled:
+    if start_in_clutter:
         start_clutter = {t for t in range(len(chained.tracklets)) if target.prefers_clutter(t)}
     start = initial_association(chained.tracklets, config.initial_merge_distance_m, start_clutter)
     diagnostics["start_objects"] = start.n_objects
     cleared: list[int] = []
-    if config.initial_clutter and config.clutter.enabled:
+    if start_in_clutter:
         start, cleared = clear_start_objects(target, start)
     chain = sampler.run(
         start,

@@ -103,26 +103,23 @@ class _Identity:
     def held(self) -> float:
         return self.weight[True] + self.weight[False]
 
+    def _accumulate(self, yielded: bool, terms: list[NDArray[np.float64]], weight: float) -> None:
+        if yielded in self.sums:
+            for acc, term in zip(self.sums[yielded], terms, strict=True):
+                acc += term
+        else:
+            self.sums[yielded] = [t.copy() for t in terms]
+        self.weight[yielded] += weight
+
     def absorb(self, other: _Identity) -> None:
         for yielded, terms in other.sums.items():
-            if yielded in self.sums:
-                for acc, term in zip(self.sums[yielded], terms, strict=True):
-                    acc += term
-            else:
-                self.sums[yielded] = [t.copy() for t in terms]
-            self.weight[yielded] += other.weight[yielded]
+            self._accumulate(yielded, terms, other.weight[yielded])
 
     def add(self, obj: SampleObject, count: float, yielded: bool) -> None:
         vec = np.concatenate([obj.location_m, obj.size_m])
         cov = np.zeros((5, 5))
         cov[:3, :3], cov[3:, 3:] = obj.location_cov, obj.size_cov
-        terms = [count * vec, count * np.outer(vec, vec), count * cov]
-        if yielded in self.sums:
-            for acc, term in zip(self.sums[yielded], terms, strict=True):
-                acc += term
-        else:
-            self.sums[yielded] = terms
-        self.weight[yielded] += count
+        self._accumulate(yielded, [count * vec, count * np.outer(vec, vec), count * cov], count)
 
     def moments(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Mean (5,) and mixture covariance (5, 5) over yielding samples, else over all."""

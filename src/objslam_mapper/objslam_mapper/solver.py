@@ -180,21 +180,24 @@ def solve(
     poses, objects = initial_state(problem, layout, warm_start)
     calib = initial_calibration(problem, warm_start)
 
+    # Phases of graduated outlier caps (objslam_mapper.outliers), each with the iteration
+    # budget; where no slice is beyond its true cap the remaining phases' costs agree with
+    # the current one: they are moot. (A shared budget was tried: it cut good proposals
+    # short, 60-80 nats below their optimum, and the chain then never took them.)
+    schedule = cap_schedule(problem, layout, poses, objects, warm_start is not None)
+    graph.cap_scale = schedule[0]
     lin = graph.linearize(poses, objects, calib)
     if not lin.valid:
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
         return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
-    # Phases of graduated outlier caps (objslam_mapper.outliers), each with the iteration
-    # budget; where no slice is beyond its true cap the remaining phases' costs agree with
-    # the current one: they are moot. (A shared budget was tried: it cut good proposals
-    # short, 60-80 nats below their optimum, and the chain then never took them.)
     iterations, state = 0, (poses, objects, calib)
-    for phase, scale in enumerate(cap_schedule(problem, layout, poses, objects, warm_start is not None)):
-        if phase and not (graph.has_outlier_model and lin.outliers):
-            break
-        graph.cap_scale = scale
-        lin = graph.linearize(*state)
+    for phase, scale in enumerate(schedule):
+        if phase:
+            if not (graph.has_outlier_model and lin.outliers):
+                break
+            graph.cap_scale = scale
+            lin = graph.linearize(*state)
         state, lin, final, more, converged = _minimize(graph, state, lin, problem.solver, limit)
         iterations += more
     poses, objects, calib = state
