@@ -6,6 +6,8 @@
 #   ASSOCIATIONS="greedy none oracle" scripts/eval_all.sh
 #   SCENARIOS="office:7 loop:4" ASSOCIATIONS=sampler OUT=out/eval_seeds scripts/eval_all.sh
 #                                            # other seeds: bags rendered as out/bags/office_7, ...
+#   MAP_ARGS="--params out/no_screen.yaml" OUT=out/eval_no_screen scripts/eval_all.sh
+#                                            # other mapper settings (passed to every objslam map)
 #
 # Renders the scenarios that are not bundled (twins, clutter, loop) into out/bags/ if
 # missing, builds each map with `objslam map --association A` at default settings
@@ -57,7 +59,8 @@ for scenario in $SCENARIOS; do
     if [ ! -f "$map" ]; then
       echo "eval_all: $scenario / $association ..." >&2
       start=$(date +%s)
-      objslam map "$bag" --out "$map" --association "$association" >"$dir/$association.log" 2>&1 || {
+      # shellcheck disable=SC2086
+      objslam map "$bag" --out "$map" --association "$association" ${MAP_ARGS:-} >"$dir/$association.log" 2>&1 || {
         echo "eval_all: objslam map failed, see $dir/$association.log" >&2
         exit 1
       }

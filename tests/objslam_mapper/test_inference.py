@@ -10,7 +10,7 @@ import pytest
 from objslam_mapper.association import CLUTTER, Association, enumerate_associations
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.clutter import DISTRACTOR, INDEPENDENT, ClutterConfig, ClutterModel
-from objslam_mapper.detection import DetectionConfig
+from objslam_mapper.detection import DetectionConfig, sightings
 from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.inference import (
     NO_OBJECT_LOG_EVIDENCE,
@@ -21,7 +21,7 @@ from objslam_mapper.inference import (
     infer_map,
     initial_association,
 )
-from objslam_mapper.sampler import ExactDistribution, MetropolisHastings
+from objslam_mapper.sampler import ExactDistribution, MetropolisHastings, MoveConfig
 from objslam_mapper.solver import solve
 from objslam_mapper.synthetic import SyntheticObject
 from objslam_mapper.tracklets import Tracklet, tracklets_of_problem
@@ -270,3 +270,54 @@ def test_a_start_object_made_of_a_patch_seen_twice_is_cleared_to_clutter():
     assert moved == blue
     assert set(cleared.clutter) == set(blue) and cleared.n_objects == 1
     assert target(cleared) > target(joined)
+
+
+def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
+    """At the screen's fixed poses and estimates its detection term is the change of the
+    changed groups' misses (the kept groups' are the target's to count): a red object
+    stands between the start and a green one that is in view from there (detection range
+    10 m) but has slices only from within 3.5 m; taking the red object away is credited
+    with the red object's misses, not charged with those the green one then has."""
+    blocker = SyntheticObject("red", (2.25, -0.65, 0.0), (0.3, 0.6))
+    problem = problem_of(simulate((RED_A, GREEN, blocker)))
+    chained = tracklets_of_problem(problem)
+    detection = DetectionConfig(max_range_m=10.0)
+    clutter = ClutterConfig(distractor_weight=0.0)  # clutter leaves the graph: nothing hides in its place
+    target = AssociationTarget(problem, chained.tracklets, clutter, exclusion=False, detection=detection)
+    state = initial_association(chained.tracklets, 0.6)
+    poses, _, estimates = target._reference(state)
+    old = target.graph_groups(state)
+    kept_estimate = dict(zip(old, estimates, strict=True))
+
+    def missed(groups, things):
+        members = [target._measurements(g) for g in groups]
+        seen = sightings(problem, poses, things, members, detection, target.view_top_rad)
+        return dict(zip(groups, seen.missed.sum(axis=0).tolist(), strict=True))
+
+    before = missed(old, estimates)
+    log_miss = np.log1p(-detection.probability)
+    sampler = MetropolisHastings(
+        chained.labels,
+        target,
+        MoveConfig(),
+        positions_xy_m=[t.position_xy_m for t in chained.tracklets],
+        tracklet_weights=[len(t) for t in chained.tracklets],
+    )
+    rng = np.random.default_rng(0)
+    blocked = [t for t, tr in enumerate(chained.tracklets) if tr.label == "red" and tr.position_xy_m[1] < 0.0]
+    moves = [Association.of([CLUTTER if t in blocked else a for t, a in enumerate(state.assignment)])]
+    moves += [p.view.state for p in (sampler.propose(sampler.view(state), rng) for _ in range(30)) if p is not None]
+    for new in moves:
+        groups = target.graph_groups(new)
+        things = np.array(
+            [kept_estimate[g] if g in kept_estimate else target._conditional(state, g)[1] for g in groups]
+        )
+        after = missed(groups, things)
+        changed = sum(n for g, n in after.items() if g not in before) - sum(
+            n for g, n in before.items() if g not in after
+        )
+        assert target._screen_detection(state, old, groups) == pytest.approx(changed * log_miss, abs=1e-9)
+    # The blind spot: without the blocker the green object misses where it was hidden.
+    green = next(g for g in old if chained.labels[g[1][0]] == "green")
+    groups = target.graph_groups(moves[0])
+    assert missed(groups, np.array([kept_estimate[g] for g in groups]))[green] > before[green]

@@ -28,6 +28,15 @@ ROWS = (
 BENCH = (sys.executable, "-m", "objslam_tools.cli", "bench", "mapper")
 
 
+def _phase_keys():
+    from objslam_tools.bench.mapper import PHASES
+
+    return [key for key, _ in PHASES]
+
+
+PHASE_KEYS = _phase_keys()
+
+
 def bench(repo_root, *extra):
     return subprocess.run(
         [*BENCH, "bags/small", "--samples", "200", "--burn-in", "50", "--no-scaling", "--naive-seconds", "1", *extra],
@@ -61,3 +70,38 @@ def test_bench_mapper_json_and_user_errors(repo_root, tmp_path):
         check=False,
     )
     assert bad.returncode == 2 and "not a rosbag2 directory" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_the_scaling_table_splits_the_growth_into_solves_and_time_per_solve():
+    from objslam_tools.bench.mapper import _table
+
+    base = json.loads(bench_json_stub())
+    rows = [
+        {"factor": f, "frames": 400 * f, "measurements": 5000 * f, "tracklets": 40 + f, "wall_s": 8.0 * f**1.4,
+         "cpu_s": 8.0 * f**1.4, "objects": 12, "graph_solves": 45 * f, "seconds_per_graph_solve": 0.09 * f**0.4}
+        for f in (1, 2, 4)
+    ]  # fmt: skip
+    base["scaling"] = {
+        "samples": 1000,
+        "rows": rows,
+        "growth_exponent_wall": 1.4,
+        "growth_exponent_cpu": 1.4,
+        "growth_exponent_graph_solves": 1.0,
+        "growth_exponent_per_graph_solve": 0.4,
+    }
+    table = _table(base)
+    assert "solves  s/solve" in table and "   180    0.157" in table
+    assert "k = 1.40 wall" in table and "MISSED" in table
+    assert "graph solves ~ frames^1.00, time per graph solve ~ frames^0.40" in table
+
+
+def bench_json_stub():
+    return json.dumps(
+        {
+            "bag": "b", "frames": 1, "measurements": 1, "tracklets": 1, "samples": 2, "burn_in": 1, "detector_s": 0.0,
+            "wall_s": 1.0, "cpu_s": 1.0, "samples_per_s": 2.0, "target_wall_s": 60.0, "target_speedup": 20.0,
+            "phases_s": {key: 0.0 for key in PHASE_KEYS}, "graph_solves": 1, "screens": 1, "object_solves": 1,
+            "clutter_solves": 1, "marginal_solves": 1, "distinct_associations_visited": 1, "acceptance_rate": 0.5,
+            "objects": 1, "rejected": 0,
+        }
+    )  # fmt: skip

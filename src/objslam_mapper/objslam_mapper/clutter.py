@@ -46,8 +46,10 @@ fixed function of the association; the max of a two-term mixture is within ``log
 it. In practice a tracklet that fits a static thing at all is a distractor, and one that
 does not (slices of nothing consistent) independent false alarms.
 
-Missed detections are modelled on neither side (an object is detected with probability
-one wherever it was seen).
+The choice leaves out the missed detections a distractor pays in the target
+(:mod:`objslam_mapper.detection`): alone, with nothing in front of it, its misses are
+overcounted. Counting them made a poster independent false alarms on the ``clutter``
+scenario, and then, with the map's objects hiding it in most of those images, an object.
 """
 
 from __future__ import annotations

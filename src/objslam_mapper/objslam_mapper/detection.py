@@ -102,7 +102,7 @@ class Sight:
 
     def columns(self, index: Sequence[int]) -> Sight:
         index = np.asarray(index, dtype=np.int64)
-        return Sight(self.bearing[:, index], self.width[:, index], self.range_m[:, index], self.in_view[:, index])
+        return Sight(*(getattr(self, f)[:, index] for f in Sight.__dataclass_fields__))
 
     @staticmethod
     def join(parts: Sequence[Sight]) -> Sight:
@@ -137,29 +137,75 @@ def sight(
     return Sight(values[BEARING], values[WIDTH], dist, in_view)
 
 
-def visible(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:
-    """(N, R) whether each thing of ``rows`` is in view and hidden by no nearer one of ``occluders``
-    (a thing does not hide itself: it is not nearer than itself)."""
-    shown = rows.in_view.copy()
-    if not occluders.bearing.shape[1] or not shown.any():
-        return shown
-    # (N, R, M): the share of each row's bearing interval inside each occluder's.
-    w = rows.width[:, :, None]
-    w_occ = occluders.width[:, None, :]
-    offset = np.abs(wrap_angle(rows.bearing[:, :, None] - occluders.bearing[:, None, :]))
+def hiding_counts(
+    rows: Sight, occluders: Sight, config: DetectionConfig, where: NDArray[np.bool_] | None = None
+) -> NDArray[np.int64]:
+    """(N, R) how many of ``occluders`` hide each thing of ``rows`` where it is in view (0 elsewhere):
+    nearer, and covering more than ``occlusion_cover`` of its bearing interval (a thing does
+    not hide itself: it is not nearer than itself). ``where`` (N, R) restricts the count to
+    those entries (default ``rows.in_view``).
+
+    Counts rather than a flag so that a screen can take occluders away again
+    (:meth:`objslam_mapper.inference.AssociationTarget.screen`).
+    """
+    counts = np.zeros(rows.in_view.shape, dtype=np.int64)
+    if not occluders.bearing.shape[1]:
+        return counts
+    # Only the (pose, thing) pairs in view matter: (P, M) against every occluder.
+    pose, row = np.nonzero(rows.in_view if where is None else where)
+    w = rows.width[pose, row][:, None]
+    w_occ = occluders.width[pose]
+    offset = np.abs(wrap_angle(rows.bearing[pose, row][:, None] - occluders.bearing[pose]))
     overlap = np.minimum(np.clip(0.5 * (w + w_occ) - offset, 0.0, None), np.minimum(w, w_occ))
-    hidden = (occluders.range_m[:, None, :] < rows.range_m[:, :, None]) & (overlap > config.occlusion_cover * w)
-    return shown & ~hidden.any(axis=2)
+    hidden = (occluders.range_m[pose] < rows.range_m[pose, row][:, None]) & (overlap > config.occlusion_cover * w)
+    counts[pose, row] = np.count_nonzero(hidden, axis=1)
+    return counts
 
 
-def miss_log_likelihood(
-    problem: GraphProblem, shown: NDArray[np.bool_], groups: Sequence[NDArray[np.int64]], config: DetectionConfig
-) -> float:
-    """``n_miss log(1 - P_d)`` over (N, R) ``shown`` and the R things' ``groups`` (measurement indices)."""
-    hit = np.zeros(shown.shape, dtype=bool)
+def visible(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:
+    """(N, R) whether each thing of ``rows`` is in view and hidden by no nearer one of ``occluders``."""
+    return rows.in_view & (hiding_counts(rows, occluders, config) == 0)
+
+
+def hit_matrix(problem: GraphProblem, n_poses: int, groups: Sequence[NDArray[np.int64]]) -> NDArray[np.bool_]:
+    """(N, R) whether image n holds a slice of group r (measurement indices)."""
+    hit = np.zeros((n_poses, len(groups)), dtype=bool)
     for r, group in enumerate(groups):
         hit[problem.measurement_pose[np.asarray(group, dtype=np.int64)], r] = True
-    return int(np.count_nonzero(shown & ~hit)) * math.log1p(-config.probability)
+    return hit
+
+
+@dataclass(frozen=True)
+class Sightings:
+    """K things with their slices, from N poses: the :class:`Sight`, how many of the things
+    hide each one (``hidden_by``, (N, K)) and where each has a slice (``hit``, (N, K))."""
+
+    sight: Sight
+    hidden_by: NDArray[np.int64]
+    hit: NDArray[np.bool_]
+
+    @property
+    def missed(self) -> NDArray[np.bool_]:
+        """(N, K) images where a thing should be seen and has no slice."""
+        return self.sight.in_view & (self.hidden_by == 0) & ~self.hit
+
+
+def sightings(
+    problem: GraphProblem,
+    map_T_base: NDArray[np.float64],
+    things: NDArray[np.float64],
+    groups: Sequence[NDArray[np.int64]],
+    config: DetectionConfig,
+    view_top_rad: float,
+) -> Sightings:
+    """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices)."""
+    seen = sight(problem, map_T_base, things, config, view_top_rad)
+    return Sightings(seen, hiding_counts(seen, seen, config), hit_matrix(problem, len(seen.in_view), groups))
+
+
+def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:
+    """``n_miss log(1 - P_d)``."""
+    return n_miss * math.log1p(-config.probability)
 
 
 def detection_log_likelihood(
@@ -174,5 +220,5 @@ def detection_log_likelihood(
     (measurement indices; module docstring)."""
     if not config.enabled or not len(groups):
         return 0.0
-    seen = sight(problem, map_T_base, things, config, view_top_rad)
-    return miss_log_likelihood(problem, visible(seen, seen, config), groups, config)
+    seen = sightings(problem, map_T_base, things, groups, config, view_top_rad)
+    return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), config)

@@ -10,11 +10,20 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+_TWO_PI = 2.0 * np.pi
+
 
 def wrap_angle(angle_rad: ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angles to [-pi, pi). Works on scalars and arrays."""
-    wrapped = (np.asarray(angle_rad, dtype=float) + np.pi) % (2.0 * np.pi) - np.pi
-    return float(wrapped) if np.ndim(wrapped) == 0 else wrapped
+    angle = np.asarray(angle_rad, dtype=float)
+    # Rounding is several times faster than np.mod on arrays (this runs on every slice of
+    # every solver iteration); rounding sends odd multiples of pi to +pi, moved to -pi.
+    wrapped = np.asarray(angle - _TWO_PI * np.round(angle / _TWO_PI))
+    if wrapped.ndim == 0:
+        value = float(wrapped)
+        return value - _TWO_PI if value >= np.pi else value
+    np.subtract(wrapped, _TWO_PI, out=wrapped, where=wrapped >= np.pi)
+    return wrapped
 
 
 def rotation(theta_rad: float) -> NDArray[np.float64]:
