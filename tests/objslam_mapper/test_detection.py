@@ -12,7 +12,7 @@ from objslam_mapper.catalog import load_catalog
 from objslam_mapper.detection import (
     DetectionConfig,
     detection_log_likelihood,
-    hiding_counts,
+    hidden,
     sight,
     view_top_elevation,
     visible,
@@ -84,16 +84,13 @@ def test_the_view_top_is_read_off_the_slices_upper_edges():
     assert top > 0.0  # the cyan object's top is above the camera
 
 
-def test_hiding_counts_count_every_occluder_and_only_where_asked():
+def test_a_thing_is_hidden_by_any_nearer_one_that_covers_it():
     near = [2.0, 0.0, 0.0, 0.4, 0.4]
     nearer = [1.0, 0.02, 0.0, 0.3, 0.6]
     far = [5.0, 0.0, 0.0, 0.4, 0.4]
     poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.pi / 2]])
     seen = sight(_Problem(), poses, np.array([near, nearer, far]), CONFIG, 0.4)
-    counts = hiding_counts(seen, seen, CONFIG)
-    assert counts[:, 2].tolist() == [2, 2]  # the far one, behind both (the pose's heading does not matter)
-    assert counts[:, 0].tolist() == [1, 1] and counts[:, 1].tolist() == [0, 0]
-    where = np.zeros((2, 3), dtype=bool)
-    where[1, 2] = True
-    assert hiding_counts(seen, seen, CONFIG, where=where).tolist() == [[0, 0, 0], [0, 0, 2]]
+    # The far one is behind both, the near one behind the nearer (the heading does not matter).
+    assert hidden(seen, seen, CONFIG).tolist() == [[True, False, True]] * 2
+    assert hidden(seen, seen.columns([2]), CONFIG).tolist() == [[False, False, False]] * 2  # nothing behind
     assert visible(seen, seen, CONFIG).tolist() == [[False, True, False]] * 2

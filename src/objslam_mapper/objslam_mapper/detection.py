@@ -137,34 +137,27 @@ def sight(
     return Sight(values[BEARING], values[WIDTH], dist, in_view)
 
 
-def hiding_counts(
-    rows: Sight, occluders: Sight, config: DetectionConfig, where: NDArray[np.bool_] | None = None
-) -> NDArray[np.int64]:
-    """(N, R) how many of ``occluders`` hide each thing of ``rows`` where it is in view (0 elsewhere):
-    nearer, and covering more than ``occlusion_cover`` of its bearing interval (a thing does
-    not hide itself: it is not nearer than itself). ``where`` (N, R) restricts the count to
-    those entries (default ``rows.in_view``).
-
-    Counts rather than a flag so that a screen can take occluders away again
-    (:meth:`objslam_mapper.inference.AssociationTarget.screen`).
-    """
-    counts = np.zeros(rows.in_view.shape, dtype=np.int64)
+def hidden(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:
+    """(N, R) whether some thing of ``occluders`` hides each thing of ``rows`` where it is in
+    view (False elsewhere): nearer, and covering more than ``occlusion_cover`` of its bearing
+    interval (a thing does not hide itself: it is not nearer than itself)."""
+    out = np.zeros(rows.in_view.shape, dtype=bool)
     if not occluders.bearing.shape[1]:
-        return counts
+        return out
     # Only the (pose, thing) pairs in view matter: (P, M) against every occluder.
-    pose, row = np.nonzero(rows.in_view if where is None else where)
+    pose, row = np.nonzero(rows.in_view)
     w = rows.width[pose, row][:, None]
     w_occ = occluders.width[pose]
     offset = np.abs(wrap_angle(rows.bearing[pose, row][:, None] - occluders.bearing[pose]))
     overlap = np.minimum(np.clip(0.5 * (w + w_occ) - offset, 0.0, None), np.minimum(w, w_occ))
-    hidden = (occluders.range_m[pose] < rows.range_m[pose, row][:, None]) & (overlap > config.occlusion_cover * w)
-    counts[pose, row] = np.count_nonzero(hidden, axis=1)
-    return counts
+    covers = (occluders.range_m[pose] < rows.range_m[pose, row][:, None]) & (overlap > config.occlusion_cover * w)
+    out[pose, row] = covers.any(axis=1)
+    return out
 
 
 def visible(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:
     """(N, R) whether each thing of ``rows`` is in view and hidden by no nearer one of ``occluders``."""
-    return rows.in_view & (hiding_counts(rows, occluders, config) == 0)
+    return rows.in_view & ~hidden(rows, occluders, config)
 
 
 def hit_matrix(problem: GraphProblem, n_poses: int, groups: Sequence[NDArray[np.int64]]) -> NDArray[np.bool_]:
@@ -177,17 +170,17 @@ def hit_matrix(problem: GraphProblem, n_poses: int, groups: Sequence[NDArray[np.
 
 @dataclass(frozen=True)
 class Sightings:
-    """K things with their slices, from N poses: the :class:`Sight`, how many of the things
-    hide each one (``hidden_by``, (N, K)) and where each has a slice (``hit``, (N, K))."""
+    """K things with their slices, from N poses: the :class:`Sight`, where the others hide
+    each one (``hidden``, (N, K)) and where each has a slice (``hit``, (N, K))."""
 
     sight: Sight
-    hidden_by: NDArray[np.int64]
+    hidden: NDArray[np.bool_]
     hit: NDArray[np.bool_]
 
     @property
     def missed(self) -> NDArray[np.bool_]:
         """(N, K) images where a thing should be seen and has no slice."""
-        return self.sight.in_view & (self.hidden_by == 0) & ~self.hit
+        return self.sight.in_view & ~self.hidden & ~self.hit
 
 
 def sightings(
@@ -200,7 +193,7 @@ def sightings(
 ) -> Sightings:
     """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices)."""
     seen = sight(problem, map_T_base, things, config, view_top_rad)
-    return Sightings(seen, hiding_counts(seen, seen, config), hit_matrix(problem, len(seen.in_view), groups))
+    return Sightings(seen, hidden(seen, seen, config), hit_matrix(problem, len(seen.in_view), groups))
 
 
 def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:
