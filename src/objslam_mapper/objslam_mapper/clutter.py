@@ -47,9 +47,8 @@ it. In practice a tracklet that fits a static thing at all is a distractor, and 
 does not (slices of nothing consistent) independent false alarms.
 
 The choice leaves out the missed detections a distractor pays in the target
-(:mod:`objslam_mapper.detection`): alone, with nothing in front of it, its misses are
-overcounted. Counting them made a poster independent false alarms on the ``clutter``
-scenario, and then, with the map's objects hiding it in most of those images, an object.
+(:mod:`objslam_mapper.detection`): alone, with nothing in front of it, its misses would be
+overcounted.
 """
 
 from __future__ import annotations
