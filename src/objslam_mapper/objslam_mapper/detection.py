@@ -19,7 +19,7 @@ What differs is the misses: the likelihood of ``J`` gains, per object and per di
     n_miss log(1 - P_d),
 
 ``n_miss`` the images where it should be seen and has none of its slices. "Should be
-seen", at the MAP of ``J`` (:func:`expected_visible`):
+seen", at the MAP of ``J`` (:func:`sightings`):
 
 - its predicted angular width is at least ``detection.min_angular_width_rad`` (twice the
   detector's narrowest blob by default: marginal blobs are not counted as misses), and it

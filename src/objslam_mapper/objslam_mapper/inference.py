@@ -82,7 +82,6 @@ from objslam_mapper.detection import (
     DetectionConfig,
     Sight,
     Sightings,
-    detection_log_likelihood,
     hit_matrix,
     miss_count_log_likelihood,
     sight,
@@ -228,7 +227,8 @@ class AssociationTarget:
         self._components: dict[int, Component] = {}
         # Per state: the poses and groups its screens are conditioned on (its MAP when first solved).
         self._references: OrderedDict[Association, tuple[NDArray, NDArray, NDArray]] = OrderedDict()
-        self._sights: OrderedDict[Association, Sightings] = OrderedDict()
+        # Per state: how its graph groups appear, and the poses that was computed at.
+        self._sights: OrderedDict[Association, tuple[NDArray, Sightings]] = OrderedDict()
         self._group_evidence: OrderedDict[tuple[Association, GraphGroup], tuple[float, NDArray]] = OrderedDict()
         self.solves = 0
         self.solve_seconds = 0.0
@@ -325,14 +325,8 @@ class AssociationTarget:
 
     def detection_log_likelihood(self, state: Association, solution: GraphSolution) -> float:
         """The detection term of ``state``'s objects and distractors at its MAP (objslam_mapper.detection)."""
-        return detection_log_likelihood(
-            self.problem,
-            solution.map_T_base,
-            _estimates(solution),
-            [self._measurements(g) for g in self.graph_groups(state)],
-            self.detection,
-            self.view_top_rad,
-        )
+        seen = self._sightings(state, solution.map_T_base, _estimates(solution))
+        return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), self.detection)
 
     def no_overlap_log_probability(self, state: Association, solution: GraphSolution) -> float:
         """log P(no two objects of ``state`` overlap) at its MAP (objslam_mapper.exclusion)."""
@@ -423,17 +417,23 @@ class AssociationTarget:
 
         return term(new, fresh - old) - term(state, old - fresh)
 
-    def _reference_sightings(self, state: Association) -> Sightings:
-        """How ``state``'s graph groups appear from its reference poses (cached with the reference)."""
+    def _sightings(self, state: Association, map_T_base: NDArray, estimates: NDArray) -> Sightings:
+        """How ``state``'s graph groups (at ``estimates``) appear from ``map_T_base``.
+
+        The target term (at the state's MAP) and the screens of proposals from the state (at
+        its reference, the same MAP unless the solution was evicted and solved again) share
+        one computation: it is kept per state with the poses it was made at.
+        """
         cached = self._sights.get(state)
-        if cached is None:
-            poses, _, estimates = self._reference(state)
-            members = [self._measurements(g) for g in self.graph_groups(state)]
-            cached = sightings(self.problem, poses, estimates, members, self.detection, self.view_top_rad)
-            self._sights[state] = cached
-            if len(self._sights) > _REFERENCE_CACHE_SIZE:
-                self._sights.popitem(last=False)
-        return cached
+        if cached is not None and cached[0] is map_T_base:
+            self._sights.move_to_end(state)
+            return cached[1]
+        members = [self._measurements(g) for g in self.graph_groups(state)]
+        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad)
+        self._sights[state] = (map_T_base, seen)
+        if len(self._sights) > _REFERENCE_CACHE_SIZE:
+            self._sights.popitem(last=False)
+        return seen
 
     def _screen_detection(
         self, state: Association, old_groups: list[GraphGroup], new_groups: list[GraphGroup]
@@ -442,16 +442,16 @@ class AssociationTarget:
         association of ``new_groups`` over the groups the move changes, at the screen's
         fixed poses and estimates (their effect on hiding the others is left to the target:
         see the module docstring)."""
-        poses = self._reference(state)[0]
-        seen = self._reference_sightings(state)
+        poses, _, estimates = self._reference(state)
+        seen = self._sightings(state, poses, estimates)
         old_set, new_set = set(old_groups), set(new_groups)
         lost = [k for k, g in enumerate(old_groups) if g not in new_set]
         kept = [k for k, g in enumerate(old_groups) if g in new_set]
         gained = [g for g in new_groups if g not in old_set]
         n_miss = -int(np.count_nonzero(seen.missed[:, lost])) if lost else 0
         if gained:
-            estimates = np.array([self._conditional(state, g)[1] for g in gained])
-            fresh = sight(self.problem, poses, estimates, self.detection, self.view_top_rad)
+            gained_estimates = np.array([self._conditional(state, g)[1] for g in gained])
+            fresh = sight(self.problem, poses, gained_estimates, self.detection, self.view_top_rad)
             shown = visible(fresh, Sight.join([seen.sight.columns(kept), fresh]), self.detection)
             hit = hit_matrix(self.problem, len(poses), [self._measurements(g) for g in gained])
             n_miss += int(np.count_nonzero(shown & ~hit))
