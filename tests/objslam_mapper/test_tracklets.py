@@ -120,6 +120,45 @@ def test_a_gap_is_bridged_only_when_allowed():
     assert len(bridged.tracklets) == 1 and len(bridged.tracklets[0]) == 19
 
 
+def dense_run(images_per_step: int, step_m: float = 0.15, steps: int = 19):
+    """The straight path of ``run_of`` seen in ``images_per_step`` times as many images."""
+    n = steps * images_per_step + 1
+    poses = np.column_stack([np.arange(n) * step_m / images_per_step, np.zeros(n), np.zeros(n)])
+    return exact_odometry_run(poses)
+
+
+def exact_odometry_run(poses):
+    stamps = [k * 200_000_000 for k in range(len(poses))]
+    return simulate_run(poses, stamps, [RED], CATALOG, np.random.default_rng(0), odometry_noise_scale=0.0)
+
+
+def without_images(run, frames):
+    return [ImageSlices(im.stamp_ns, ()) if k in frames else im for k, im in enumerate(run.images)]
+
+
+@pytest.mark.parametrize("images_per_step", [1, 2, 4])
+def test_more_images_along_the_same_path_give_the_same_tracklets(images_per_step):
+    # Detections lost over the same stretches of path: seen at 1.2 m and again at 1.5 m (a
+    # short loss, bridged at every frame rate), at 1.8 m and again at 2.25 m (bridged at none).
+    run = dense_run(images_per_step)
+    x_m = run.true_map_T_base[:, 0]
+    lost = {k for k, x in enumerate(x_m) if 1.21 < x < 1.49 or 1.81 < x < 2.24}
+    problem = problem_of(run.odometry, without_images(run, lost))
+    result = tracklets_of_problem(problem, TrackletConfig(max_gap_travel_m=0.35))
+    spans = [(x_m[t.frame_indices[0]], x_m[t.frame_indices[-1]]) for t in result.tracklets]
+    assert np.allclose(spans, [(0.0, 1.8), (2.25, 2.85)], atol=1e-9)
+
+
+def test_a_gap_is_bounded_by_how_far_the_robot_moved_and_turned():
+    # Turning on the spot at 0.01 rad per image: no travel, so the turn bounds the gap.
+    poses = np.column_stack([np.zeros(20), np.zeros(20), np.arange(20) * 0.01])
+    run = exact_odometry_run(poses)
+    images = without_images(run, {8, 9, 10})  # 0.04 rad between the slices either side
+    problem = problem_of(run.odometry, images)
+    assert len(tracklets_of_problem(problem, TrackletConfig(max_gap_turn_rad=0.05)).tracklets) == 1
+    assert len(tracklets_of_problem(problem, TrackletConfig(max_gap_turn_rad=0.03)).tracklets) == 2
+
+
 @pytest.mark.parametrize("label", ["red", "blue", "yellow", "cyan"])
 @pytest.mark.parametrize("range_m", [0.8, 1.5, 3.0, 5.0])
 def test_range_from_apparent_size_inverts_the_slice_model(label, range_m):

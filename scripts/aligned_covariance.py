@@ -1,0 +1,122 @@
+"""Covariance of the object errors that `objslam eval` measures, on an oracle map (issue 4's NEES).
+
+Usage: python scripts/aligned_covariance.py BAG [--params FILE]
+
+`objslam eval` aligns the map to the ground truth by a least-squares SE(2) fit of the
+trajectory before it measures object errors, while a map's covariances are marginals in
+the frame of its first pose. This script solves the ground-truth association of BAG once,
+takes the joint covariance of all poses and objects from the solver's (sparse) normal
+equations, and propagates it through the linearized trajectory fit: the covariance of
+exactly the error `objslam eval` measures. Per object it prints that error, the map's
+marginal standard deviations and the aligned ones, and how well the aligned major axis
+lines up with the direction from the trajectory's centre (|cos| = 1: radial, a scale
+mode); then the mean NEES both ways. A diagnostic for the README's NEES discussion, not
+part of the package.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import numpy as np
+
+from objslam_detector.config import DetectorConfig
+from objslam_detector.detector import Detector
+from objslam_mapper.catalog import load_catalog
+from objslam_mapper.config import default_config_dir, load_config
+from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.pipeline import MapperConfig
+from objslam_mapper.problem import build_problem
+from objslam_mapper.solver import solve
+from objslam_mapper.tracklets import tracklets_of_problem
+from objslam_tools.bag import open_bag
+from objslam_tools.evaluate import align_track, load_reference, nees_summary
+from objslam_tools.mapper_inputs import detect_bag, odometry_samples
+from objslam_tools.oracle_map import oracle_groups
+from objslam_tools.trajectory import PoseTrack
+
+
+def joint_covariance(problem, groups, solution) -> np.ndarray:
+    """Inverse of the whole information matrix at the solution (poses, then objects, then calibration)."""
+    layout = layout_of(problem, groups)
+    system = AssociationSystem(problem, layout, dense_object_limit=-1)  # sparse LU: every variable
+    objects = np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects])
+    system.cap_scale = cap_schedule(problem, layout, solution.map_T_base, objects, True)[-1]
+    lin = system.linearize(np.array(solution.map_T_base), objects, np.array(solution.calibration))
+    factorization = system.factorize(lin, 0.0)
+    return factorization.sparse_lu.solve(np.eye(system.dimension))
+
+
+def alignment_jacobian(track_xy: np.ndarray, point_xy: np.ndarray, n_variables: int, column: int) -> np.ndarray:
+    """(2, n) map from the state error to a point's error after the trajectory fit (linearized).
+
+    The fit removes the mean of the pose errors and their rotation about the trajectory's
+    centre: point error = d_point - mean(d_i) - w J (point - c), w = sum (J p_i) . d_i / sum |p_i|^2.
+    """
+    centre = track_xy.mean(axis=0)
+    centred = track_xy - centre
+    perp = np.array([[0.0, -1.0], [1.0, 0.0]])
+    jacobian = np.zeros((2, n_variables))
+    jacobian[:, column : column + 2] = np.eye(2)
+    arm = perp @ (point_xy - centre)
+    spin = (centred @ perp.T) / float((centred**2).sum())  # (N, 2): d w / d d_i
+    for i in range(len(track_xy)):
+        jacobian[:, POSE_DIM * i : POSE_DIM * i + 2] -= np.eye(2) / len(track_xy) + np.outer(arm, spin[i])
+    return jacobian
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("bag")
+    parser.add_argument("--params", default=str(default_config_dir() / "mapper.yaml"))
+    args = parser.parse_args()
+
+    config = load_config(MapperConfig, args.params, "mapper")
+    config = dataclasses.replace(config, solver=dataclasses.replace(config.solver, backend="fast"))
+    catalog = load_catalog(config.catalog_file or None)
+    bag = open_bag(args.bag)
+    reference = load_reference(args.bag)
+    detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
+    images = detect_bag(bag, detector, lambda *_: None)
+    problem = build_problem(odometry_samples(bag), images, config.graph.camera_mount.to_mount(), catalog, config.graph)
+    chained = tracklets_of_problem(problem, config.sampler.tracklets)
+    in_tracklets = [m for t in chained.tracklets for m in t.measurement_indices]
+    by_truth, _ = oracle_groups(problem, images, reference.ground_truth, reference.ground_truth_track, in_tracklets)
+    truth_ids = sorted(by_truth)
+    groups = [by_truth[k] for k in truth_ids]
+    solution = solve(problem, groups)
+    covariance = joint_covariance(problem, groups, solution)
+
+    poses = np.asarray(solution.map_T_base)
+    alignment = align_track(PoseTrack(problem.stamps_ns, poses), reference.ground_truth_track)
+    truth = {o.id: o for o in reference.ground_truth.objects}
+    first_object = POSE_DIM * problem.pose_count
+    centre = poses[:, :2].mean(axis=0)
+    marginal_nees, aligned_nees = [], []
+    print(f"{args.bag}: {len(groups)} objects, {problem.pose_count} poses")
+    print("  truth  error m  marginal sd m      aligned sd m     |cos| radial  distance m")
+    for j, truth_id in enumerate(truth_ids):
+        estimate_xy = np.asarray(solution.objects[j].location_m[:2])
+        error = estimate_xy - alignment.to_map(truth[truth_id].position_m[:2])[0]
+        column = first_object + OBJECT_DIM * j
+        marginal = covariance[column : column + 2, column : column + 2]
+        jacobian = alignment_jacobian(poses[:, :2], estimate_xy, len(covariance), column)
+        aligned = jacobian @ covariance @ jacobian.T
+        values, vectors = np.linalg.eigh(aligned)
+        radial = estimate_xy - centre
+        cos = abs(vectors[:, -1] @ radial) / np.linalg.norm(radial)
+        marginal_nees.append(float(error @ np.linalg.solve(marginal, error)))
+        aligned_nees.append(float(error @ np.linalg.solve(aligned, error)))
+        print(
+            f"  {truth_id:5d}  {np.linalg.norm(error):7.3f}  "
+            f"{np.array2string(np.sqrt(np.linalg.eigvalsh(marginal)), precision=3):>15s}  "
+            f"{np.array2string(np.sqrt(values), precision=3):>15s}  {cos:12.2f}  {np.linalg.norm(radial):10.1f}"
+        )
+    for name, values in (("marginal (as in the map)", marginal_nees), ("aligned (as objslam eval errs)", aligned_nees)):
+        summary = nees_summary(values, 2)
+        print(f"  mean NEES xy, {name}: {summary.mean:.2f}  95 % band [{summary.band[0]:.2f}, {summary.band[1]:.2f}]")
+
+
+if __name__ == "__main__":
+    main()
