@@ -10,7 +10,8 @@ equations, and propagates it through the linearized trajectory fit: the covarian
 exactly the error `objslam eval` measures. Per object it prints that error, the map's
 marginal standard deviations and the aligned ones, and how well the aligned major axis
 lines up with the direction from the trajectory's centre (|cos| = 1: radial, a scale
-mode); then the mean NEES both ways. A diagnostic for the README's NEES discussion, not
+mode); then the mean NEES both ways, and the NEES of all objects at once with their
+correlations (which a mean of per-object NEES ignores). A diagnostic for the README's NEES discussion, not
 part of the package.
 """
 
@@ -20,6 +21,7 @@ import argparse
 import dataclasses
 
 import numpy as np
+from scipy.stats import chi2
 
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
@@ -93,7 +95,7 @@ def main() -> None:
     truth = {o.id: o for o in reference.ground_truth.objects}
     first_object = POSE_DIM * problem.pose_count
     centre = poses[:, :2].mean(axis=0)
-    marginal_nees, aligned_nees = [], []
+    marginal_nees, aligned_nees, jacobians, errors = [], [], [], []
     print(f"{args.bag}: {len(groups)} objects, {problem.pose_count} poses")
     print("  truth  error m  marginal sd m      aligned sd m     |cos| radial  distance m")
     for j, truth_id in enumerate(truth_ids):
@@ -106,6 +108,8 @@ def main() -> None:
         values, vectors = np.linalg.eigh(aligned)
         radial = estimate_xy - centre
         cos = abs(vectors[:, -1] @ radial) / np.linalg.norm(radial)
+        jacobians.append(jacobian)
+        errors.append(error)
         marginal_nees.append(float(error @ np.linalg.solve(marginal, error)))
         aligned_nees.append(float(error @ np.linalg.solve(aligned, error)))
         print(
@@ -116,6 +120,12 @@ def main() -> None:
     for name, values in (("marginal (as in the map)", marginal_nees), ("aligned (as objslam eval errs)", aligned_nees)):
         summary = nees_summary(values, 2)
         print(f"  mean NEES xy, {name}: {summary.mean:.2f}  95 % band [{summary.band[0]:.2f}, {summary.band[1]:.2f}]")
+    # All objects at once with their correlations: one chi-square of 2K degrees of freedom.
+    stacked = np.vstack(jacobians)
+    error = np.concatenate(errors)
+    joint = float(error @ np.linalg.solve(stacked @ covariance @ stacked.T, error))
+    low, high = chi2.ppf([0.025, 0.975], len(error))
+    print(f"  joint NEES xy, aligned, all objects: {joint:.1f}  95 % band [{low:.1f}, {high:.1f}] ({len(error)} dof)")
 
 
 if __name__ == "__main__":
