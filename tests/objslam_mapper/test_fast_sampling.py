@@ -105,7 +105,7 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
     class ScreenOnly(MetropolisHastings):
         def _log_acceptance(self, state, log_p, proposal, rng):
             log_first = self.screen(state, proposal.view.state) + proposal.log_q_reverse - proposal.log_q_forward
-            return log_first
+            return log_first, False
 
     sampler = ScreenOnly(
         labels,

@@ -54,7 +54,7 @@ from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from itertools import accumulate
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -256,6 +256,13 @@ class Proposal:
     log_q_reverse: float  # log P(reverse kind | J') q(J' -> J), in the proposed state
 
 
+class Acceptance(NamedTuple):
+    """The verdict on one proposal."""
+
+    log_alpha: float | None  # log acceptance probability; None: the screen rejected it
+    at_floor: bool  # it passed the screen only by the screen's floor
+
+
 class MetropolisHastings:
     """MH sampler over associations of a fixed set of tracklets.
 
@@ -295,7 +302,6 @@ class MetropolisHastings:
         if np.any(self.weights <= 0.0):
             raise SamplerError("tracklet weights must be positive")
         self.target = log_target if isinstance(log_target, CachedLogTarget) else CachedLogTarget(log_target)
-        self.passed_at_floor = False  # whether the last proposal through the screen passed only by its floor
         self.allow_clutter = allow_clutter
         probs = {kind: float(getattr(self.moves, kind)) for kind in MOVE_KINDS}
         if not allow_clutter:
@@ -522,23 +528,23 @@ class MetropolisHastings:
     # ---- the chain ---------------------------------------------------------------
     def _log_acceptance(
         self, state: Association, log_p: float, proposal: Proposal, rng: np.random.Generator
-    ) -> float | None:
+    ) -> Acceptance:
         """log of the acceptance probability of ``proposal`` from ``state`` (whose log target
         is ``log_p``); None when the screen rejected it (its target is then never computed)."""
         new = proposal.view.state
         log_q = proposal.log_q_reverse - proposal.log_q_forward
         if self.screen is None:
-            return self.target(new) - log_p + log_q
+            return Acceptance(self.target(new) - log_p + log_q, False)
         log_floor = self._log_floor(state, new)
         log_first = self._first_stage(self.screen(state, new) + log_q, log_floor)
         if not (log_first >= 0.0 or math.log(rng.random()) < log_first):
-            return None
-        self.passed_at_floor = log_first <= log_floor
+            return Acceptance(None, False)
+        at_floor = log_first <= log_floor
         log_p_new = self.target(new)
         if log_p_new == -math.inf:
-            return -math.inf
+            return Acceptance(-math.inf, at_floor)
         log_back = self._first_stage(self.screen(new, state) - log_q, self._log_floor(new, state))
-        return log_p_new - log_p + log_q + log_back - log_first
+        return Acceptance(log_p_new - log_p + log_q + log_back - log_first, at_floor)
 
     def _log_floor(self, state: Association, new: Association) -> float:
         """The screen's floor for the move ``state -> new``: the join floor when an object of
@@ -603,14 +609,13 @@ class MetropolisHastings:
             if proposal is not None:
                 kind = proposal.kind
                 stats[kind].proposed += 1
-                log_alpha = self._log_acceptance(view.state, log_p, proposal, rng)
-                if log_alpha is not None and self.screen is not None and self.passed_at_floor:
-                    stats[kind].floor_passes += 1
+                log_alpha, at_floor = self._log_acceptance(view.state, log_p, proposal, rng)
+                stats[kind].floor_passes += int(at_floor)
                 if log_alpha is None:
                     stats[kind].screened_out += 1
                 elif log_alpha >= 0.0 or math.log(rng.random()) < log_alpha:
                     stats[kind].accepted += 1
-                    stats[kind].floor_accepted += int(self.screen is not None and self.passed_at_floor)
+                    stats[kind].floor_accepted += int(at_floor)
                     view, log_p = proposal.view, self.target(proposal.view.state)
                     visited.add(view.state)
                     if on_move is not None:
