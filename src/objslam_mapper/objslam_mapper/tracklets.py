@@ -67,12 +67,14 @@ class TrackletConfig:
     range_relative_uncertainty: float = setting(
         0.35, "relative uncertainty of the range estimated from apparent size", minimum=0.0, maximum=0.95
     )
-    max_frame_gap: int = setting(1, "images a tracklet may skip (1: consecutive images only)", minimum=1)
+    max_frame_gap: int = setting(
+        1, "a tracklet may continue this many images after its last slice (1: in the next image)", minimum=1
+    )
     max_gap_travel_m: float = setting(
-        0.1, "beyond max_frame_gap, a tracklet may skip images while the robot travels at most this (m)", minimum=0.0
+        0.1, "... or in any later image while the robot has travelled at most this (m)", minimum=0.0
     )
     max_gap_turn_rad: float = setting(
-        0.05, "... and turns at most this (rad) since the tracklet's last slice", minimum=0.0
+        0.05, "... and turned at most this (rad) since the tracklet's last slice", minimum=0.0
     )
     min_length: int = setting(2, "shorter tracklets are dropped (2: drop isolated detections)", minimum=1)
     min_range_m: float = setting(0.2, "range estimates are clipped to at least this (m)", minimum=0.01)
