@@ -105,3 +105,15 @@ def bench_json_stub():
             "objects": 1, "rejected": 0,
         }
     )  # fmt: skip
+
+
+def test_the_scaling_runs_build_the_real_workload_unless_told_otherwise():
+    import argparse
+
+    from objslam_tools.bench.mapper import add_arguments, scaling_chain
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert scaling_chain(parser.parse_args([])) == (6000, 2500)
+    assert scaling_chain(parser.parse_args(["--samples", "300", "--burn-in", "100"])) == (300, 100)
+    assert scaling_chain(parser.parse_args(["--scaling-samples", "1000"])) == (1000, 250)
