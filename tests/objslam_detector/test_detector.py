@@ -7,7 +7,7 @@ import math
 import cv2
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from objslam_detector import DetectedSlice, Detector
@@ -56,6 +56,8 @@ def test_single_object_of_each_class_is_measured_accurately(label):
     bearing_deg=st.floats(-180.0, 180.0),
     scale=st.floats(0.9, 1.1),
 )
+# Found by CI: a sliver column at the silhouette's end made a least-squares rim fit see a jump.
+@example(label="red", range_m=1.5, bearing_deg=120.0625, scale=0.97265625)
 def test_one_floor_object_anywhere_gives_one_accurate_slice(label, range_m, bearing_deg, scale):
     scene = scene_of((place(0, label, range_m, bearing_deg, scale),))
     slices = detect(render(scene, seed=int(range_m * 1000)))

@@ -62,9 +62,18 @@ class _Edges(NamedTuple):
         left = np.arange(max(k + 1 - MIN_SIDE_COLS, 0), k + 1)
         right = np.arange(k + 1, min(k + 1 + MIN_SIDE_COLS, len(values)))
         at = k + 0.5
-        return float(
-            np.polyval(np.polyfit(right, values[right], 1), at) - np.polyval(np.polyfit(left, values[left], 1), at)
-        )
+        return _line_at(right, values[right], at) - _line_at(left, values[left], at)
+
+
+def _line_at(x: NDArray[np.int64], y: NDArray[np.float64], at: float) -> float:
+    """A line through (x, y) evaluated at ``at``, fitted robustly (Theil-Sen: median slope, median offset).
+
+    A silhouette's outermost column can be a sliver only a few pixels tall; a least-squares
+    line through it would see a jump beside a single object's smooth rim.
+    """
+    i, j = np.triu_indices(len(x), k=1)
+    slope = float(np.median((y[j] - y[i]) / (x[j] - x[i])))
+    return float(np.median(y - slope * x) + slope * at)
 
 
 def separate(mask: NDArray[np.bool_], horizon_row: float, cut: bool = False) -> list[Part]:
