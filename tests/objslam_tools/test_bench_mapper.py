@@ -117,3 +117,16 @@ def test_the_scaling_runs_build_the_real_workload_unless_told_otherwise():
     assert scaling_chain(parser.parse_args([])) == (6000, 2500)
     assert scaling_chain(parser.parse_args(["--samples", "300", "--burn-in", "100"])) == (300, 100)
     assert scaling_chain(parser.parse_args(["--scaling-samples", "1000"])) == (1000, 250)
+
+
+def test_cached_detections_are_keyed_on_the_detector():
+    import dataclasses
+
+    from objslam_detector.config import DetectorConfig
+    from objslam_mapper.catalog import load_catalog
+    from objslam_tools.bench.mapper import detector_fingerprint
+
+    config, catalog = DetectorConfig(), load_catalog()
+    assert detector_fingerprint(config, catalog) == detector_fingerprint(DetectorConfig(), load_catalog())
+    other = dataclasses.replace(config, use_compressed=not config.use_compressed)
+    assert detector_fingerprint(other, catalog) != detector_fingerprint(config, catalog)

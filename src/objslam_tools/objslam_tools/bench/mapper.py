@@ -82,8 +82,23 @@ def _config(args: argparse.Namespace, samples: int, burn_in: int) -> Any:
     return dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, **overrides))
 
 
+def detector_fingerprint(detector_config: Any, catalog: Any) -> str:
+    """What the detections of a bag depend on besides the bag: the detector's code, settings and catalog."""
+    import hashlib
+
+    import objslam_detector
+
+    digest = hashlib.sha256(repr((detector_config, catalog)).encode())
+    for source in sorted(Path(objslam_detector.__file__).resolve().parent.glob("*.py")):
+        digest.update(source.read_bytes())
+    return digest.hexdigest()
+
+
 def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tuple, tuple, float]:
-    """(odometry, images, detector seconds); detections are cached per bag in ``cache_dir`` (0 s when reused)."""
+    """(odometry, images, detector seconds); detections are cached per bag in ``cache_dir`` (0 s when reused).
+
+    A cached entry is used only for the same bag files and the same detector (code, settings, catalog).
+    """
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
     from objslam_mapper.catalog import load_catalog
@@ -92,7 +107,9 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
     from objslam_tools.mapper_inputs import detect_bag, odometry_samples
 
     bag = open_bag(str(bag_path))
-    stamp = max(p.stat().st_mtime_ns for p in bag_path.iterdir())
+    catalog = load_catalog(config.catalog_file or None)
+    detector_config = load_config(DetectorConfig, None, "detector")
+    stamp = (max(p.stat().st_mtime_ns for p in bag_path.iterdir()), detector_fingerprint(detector_config, catalog))
     cache = None
     if cache_dir is not None:
         cache = cache_dir / f"{bag_path.resolve().name}.detections.pkl"
@@ -100,8 +117,7 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
             saved_stamp, odometry, images = pickle.loads(cache.read_bytes())
             if saved_stamp == stamp:
                 return odometry, images, 0.0
-    catalog = load_catalog(config.catalog_file or None)
-    detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
+    detector = Detector(detector_config, catalog)
     started = time.perf_counter()
     odometry = odometry_samples(bag)
     images = detect_bag(bag, detector)
