@@ -529,8 +529,9 @@ class MetropolisHastings:
     def _log_acceptance(
         self, state: Association, log_p: float, proposal: Proposal, rng: np.random.Generator
     ) -> Acceptance:
-        """log of the acceptance probability of ``proposal`` from ``state`` (whose log target
-        is ``log_p``); None when the screen rejected it (its target is then never computed)."""
+        """The verdict on ``proposal`` from ``state`` (whose log target is ``log_p``): the log of
+        its acceptance probability, None when the screen rejected it (its target is then never
+        computed), and whether it passed the screen only by the floor."""
         new = proposal.view.state
         log_q = proposal.log_q_reverse - proposal.log_q_forward
         if self.screen is None:
