@@ -75,7 +75,9 @@ def main() -> None:
     args = parser.parse_args()
 
     config = load_config(MapperConfig, args.params, "mapper")
-    config = dataclasses.replace(config, solver=dataclasses.replace(config.solver, backend="fast"))
+    # One graph pose per image: the fit below is over the poses the map reports.
+    keyframes = dataclasses.replace(config.solver.keyframes, enabled=False)
+    config = dataclasses.replace(config, solver=dataclasses.replace(config.solver, backend="fast", keyframes=keyframes))
     catalog = load_catalog(config.catalog_file or None)
     bag = open_bag(args.bag)
     reference = load_reference(args.bag)

@@ -8,7 +8,9 @@ from hypothesis import strategies as st
 
 from objslam_mapper.geometry import (
     between,
+    between_rows,
     compose,
+    compose_rows,
     interpolate_pose,
     inverse,
     quaternion_from_yaw,
@@ -41,6 +43,13 @@ def test_between_undoes_compose(a_T_b, b_T_c):
     got = between(a_T_b, a_T_c)
     np.testing.assert_allclose(got[:2], b_T_c[:2], atol=1e-7)
     assert abs(wrap_angle(got[2] - b_T_c[2])) < 1e-9
+
+
+@given(st.lists(st.tuples(poses, poses), min_size=1, max_size=5))
+def test_row_wise_compose_and_between_are_the_single_ones(pairs):
+    a, b = (np.array(side) for side in zip(*pairs, strict=True))
+    np.testing.assert_allclose(compose_rows(a, b), [compose(p, q) for p, q in pairs], atol=1e-9)
+    np.testing.assert_allclose(between_rows(a, b), [between(p, q) for p, q in pairs], atol=1e-9)
 
 
 @given(poses)

@@ -19,7 +19,7 @@ from objslam_mapper import gtsam_backend
 from objslam_mapper.backends import solve_with_backend
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.config import ConfigError, from_mapping
-from objslam_mapper.graph_config import GraphConfig, SolverConfig, load_graph_config
+from objslam_mapper.graph_config import GraphConfig, KeyframeConfig, SolverConfig, load_graph_config
 from objslam_mapper.gtsam_backend import (
     GtsamBackendError,
     _damped,
@@ -99,6 +99,20 @@ def test_same_map_evidence_and_marginals_as_the_fast_solver(reference, drive, pe
         np.testing.assert_array_equal(a.measurement_indices, b.measurement_indices)
         np.testing.assert_allclose(a.location_cov, b.location_cov, rtol=1e-4)
         np.testing.assert_allclose(a.size_cov, b.size_cov, rtol=1e-4)
+
+
+@pytest.mark.parametrize("per_detection", [True, False], ids=["per-detection", "per-group"])
+def test_a_keyframe_graph_solves_to_the_same_numbers(per_detection):
+    """Images between keyframes (objslam_mapper.keyframes): both backends solve the same graph."""
+    sparse = KeyframeConfig(min_travel_m=2.5, min_turn_rad=10.0)  # about 1 m per image: every third
+    config = dataclasses.replace(TIGHT, solver=dataclasses.replace(TIGHT.solver, keyframes=sparse))
+    problem, groups = make_problem(8, config=config)
+    assert problem.keyframes.problem.pose_count < problem.pose_count / 2
+    ours = solve(problem, groups, with_covariances=True)
+    theirs = solve_gtsam(problem, groups, with_covariances=True, per_detection=per_detection, window_poses=None)
+    assert_same_solution(theirs, ours)
+    for a, b in zip(theirs.objects, ours.objects, strict=True):
+        np.testing.assert_allclose(a.location_cov, b.location_cov, rtol=1e-4)
 
 
 def test_warm_start_and_a_split_match_the_fast_solver(reference):

@@ -136,3 +136,35 @@ class CameraMount:
         azimuth = wrap_angle(np.arctan2(dy, dx) - cam[2])
         elevation = np.arctan2(pts[:, 2] - self.height_m, rng)
         return azimuth, elevation, rng
+
+
+@dataclass(frozen=True, eq=False)
+class CameraMounts:
+    """One camera mount per measurement: ``CameraMount``'s fields, the planar ones as (M,) arrays.
+
+    A slice seen from an image that is not a graph pose (``objslam_mapper.keyframes``)
+    is predicted from the graph pose before it: the camera then sits at
+    ``graph_T_image ∘ base_T_camera`` relative to that pose. The slice model takes this
+    wherever it takes a ``CameraMount`` (the fields broadcast over measurements).
+    """
+
+    height_m: float
+    offset_x_m: NDArray[np.float64]
+    offset_y_m: NDArray[np.float64]
+    yaw_rad: NDArray[np.float64]
+
+    @classmethod
+    def behind(cls, mount: CameraMount, graph_T_base: ArrayLike) -> CameraMounts:
+        """The mounts of cameras on robots at (M, 3) poses ``graph_T_base`` relative to the graph poses."""
+        pose = np.atleast_2d(np.asarray(graph_T_base, dtype=float))
+        cos_t, sin_t = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        return cls(
+            height_m=mount.height_m,
+            offset_x_m=pose[:, 0] + cos_t * mount.offset_x_m - sin_t * mount.offset_y_m,
+            offset_y_m=pose[:, 1] + sin_t * mount.offset_x_m + cos_t * mount.offset_y_m,
+            yaw_rad=pose[:, 2] + mount.yaw_rad,
+        )
+
+    def take(self, index: ArrayLike) -> CameraMounts:
+        """The mounts of measurements ``index``."""
+        return CameraMounts(self.height_m, self.offset_x_m[index], self.offset_y_m[index], self.yaw_rad[index])

@@ -52,6 +52,26 @@ def between(a_T_b: ArrayLike, a_T_c: ArrayLike) -> NDArray[np.float64]:
     return compose(inverse(a_T_b), a_T_c)
 
 
+def compose_rows(a_T_b: ArrayLike, b_T_c: ArrayLike) -> NDArray[np.float64]:
+    """``compose`` row by row of (N, 3) poses (rows broadcast)."""
+    a_T_b = np.atleast_2d(np.asarray(a_T_b, dtype=float))
+    b_T_c = np.atleast_2d(np.asarray(b_T_c, dtype=float))
+    cos_t, sin_t = np.cos(a_T_b[:, 2]), np.sin(a_T_b[:, 2])
+    x = a_T_b[:, 0] + cos_t * b_T_c[:, 0] - sin_t * b_T_c[:, 1]
+    y = a_T_b[:, 1] + sin_t * b_T_c[:, 0] + cos_t * b_T_c[:, 1]
+    return np.stack(np.broadcast_arrays(x, y, wrap_angle(a_T_b[:, 2] + b_T_c[:, 2])), axis=-1)
+
+
+def between_rows(a_T_b: ArrayLike, a_T_c: ArrayLike) -> NDArray[np.float64]:
+    """``between`` row by row of (N, 3) poses (rows broadcast)."""
+    a_T_b = np.atleast_2d(np.asarray(a_T_b, dtype=float))
+    a_T_c = np.atleast_2d(np.asarray(a_T_c, dtype=float))
+    cos_t, sin_t = np.cos(a_T_b[:, 2]), np.sin(a_T_b[:, 2])
+    dx, dy = a_T_c[:, 0] - a_T_b[:, 0], a_T_c[:, 1] - a_T_b[:, 1]
+    x, y = cos_t * dx + sin_t * dy, -sin_t * dx + cos_t * dy
+    return np.stack(np.broadcast_arrays(x, y, wrap_angle(a_T_c[:, 2] - a_T_b[:, 2])), axis=-1)
+
+
 def transform_points(a_T_b: ArrayLike, b_points_xy: ArrayLike) -> NDArray[np.float64]:
     """Map (N, 2) points from frame b into frame a."""
     a_T_b = np.asarray(a_T_b, dtype=float)

@@ -146,6 +146,25 @@ SOLVER_BACKENDS = ("fast", "gtsam")
 
 
 @dataclass(frozen=True)
+class KeyframeConfig:
+    """Which images get a robot pose of their own in the factor graph (objslam_mapper.keyframes).
+
+    An image becomes a keyframe once the odometry has travelled ``min_travel_m`` or turned
+    ``min_turn_rad`` since the last keyframe; the images between are tied to the keyframe
+    before them by their odometry (its noise added to their slices'). The graph then
+    grows with the path, not with the frame rate. The defaults are below the motion
+    between the bundled bags' images (about 8 cm), so there only images taken while the
+    robot (nearly) stands share a pose.
+    """
+
+    enabled: bool = setting(True, "tie images taken close together to one graph pose (false: one pose per image)")
+    min_travel_m: float = setting(
+        0.05, "an image is a keyframe once the robot has travelled this far since the last keyframe (m)", minimum=0.0
+    )
+    min_turn_rad: float = setting(0.05, "... or turned this much (rad)", minimum=0.0)
+
+
+@dataclass(frozen=True)
 class SolverConfig:
     """Gauss-Newton / Levenberg-Marquardt loop of the known-association solve."""
 
@@ -170,6 +189,7 @@ class SolverConfig:
         "which solver runs each known-association solve: 'fast' (objslam_mapper.solver, numpy) or 'gtsam' "
         "(objslam_mapper.gtsam_backend: the same model as a GTSAM factor graph; same answers, slower)",
     )
+    keyframes: KeyframeConfig = setting(KeyframeConfig(), "which images get a graph pose of their own")
 
     def __post_init__(self) -> None:
         if self.backend not in SOLVER_BACKENDS:

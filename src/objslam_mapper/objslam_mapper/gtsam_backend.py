@@ -199,7 +199,7 @@ def _slice_factor(
     inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[measurements].T)
     cap = problem.measurement_outlier_cost[measurements] * cap_scale
     capped = bool(np.isfinite(cap).any())
-    mount = problem.mount
+    mount = problem.mounts(measurements)
     n_keys = len(pose_keys)
 
     def error(_factor: gtsam.CustomFactor, values: gtsam.Values, jacobians: list | None) -> NDArray[np.float64]:
@@ -308,6 +308,7 @@ def build_gtsam_graph(
     ``per_detection=False``: None makes one slice factor per group and one odometry factor
     for the whole trajectory. ``cap_scale`` multiplies the slices' outlier caps (inf: none).
     """
+    problem = problem.keyframes.problem
     return _build(problem, layout_of(problem, groups, priors), per_detection, window_poses, cap_scale)
 
 
@@ -490,19 +491,21 @@ def solve_gtsam(
     """
     if drive not in DRIVES:
         raise GtsamBackendError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
+    keyframes = problem.keyframes
+    problem = keyframes.problem  # from here on the graph's: one pose per keyframe
     layout = layout_of(problem, groups, priors)
-    poses, objects = initial_state(problem, layout, warm_start)
+    poses, objects = initial_state(keyframes, layout, warm_start)
     calib = initial_calibration(problem, warm_start)
     valid = predict_reduced(
         poses[layout.pose_of],
         objects[layout.object_of, :3],
         objects[layout.object_of, 3:],
-        problem.mount,
+        problem.mounts(layout.measurements),
         jacobians=False,
     ).valid
     if not np.all(valid):
         logger.debug("GTSAM solve cannot start: a pose lies inside an object's starting cylinder")
-        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
+        return make_solution(keyframes, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
 
     cfg = problem.solver
     limit = cfg.max_iterations if max_iterations is None else max_iterations
@@ -543,7 +546,7 @@ def solve_gtsam(
         calib_cov = marginals.marginalCovariance(keys.calibration()) if keys.calibration_dim else np.zeros((0, 0))
     poses, objects = keys.from_values(driven.values)
     return make_solution(
-        problem,
+        keyframes,
         layout,
         poses,
         objects,

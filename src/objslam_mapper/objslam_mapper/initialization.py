@@ -57,7 +57,7 @@ def initial_object(
     mean, sd = problem.prior_mean[label], problem.prior_stddev[label]
     z_base, diameter, height = mean[2], mean[3], mean[4]
     radius, radius_var = 0.5 * diameter, (0.5 * sd[3]) ** 2
-    mount = problem.mount
+    mount = problem.mounts(idx)
 
     pose = np.asarray(map_T_base, dtype=float)[problem.measurement_pose[idx]]
     cam_x, cam_y = camera_positions(pose, mount)

@@ -210,7 +210,8 @@ def beyond_cap(
 ) -> NDArray[np.bool_]:
     """(A,) whether each slice of the association is beyond its outlier cost (times ``cap_scale``)."""
     obj = objects[layout.object_of]
-    pred = predict_reduced(poses[layout.pose_of], obj[:, :3], obj[:, 3:], problem.mount, jacobians=False)
+    mounts = problem.mounts(layout.measurements)
+    pred = predict_reduced(poses[layout.pose_of], obj[:, :3], obj[:, 3:], mounts, jacobians=False)
     res = pred.values - problem.measurements[layout.measurements].T
     res[BEARING] = wrap_angle(res[BEARING])
     res /= problem.measurement_stddev[layout.measurements].T
@@ -348,6 +349,7 @@ class AssociationSystem:
         self.prior_mean = problem.prior_mean[layout.priors]
         self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.priors]
         self.log_normalizer = graph_log_normalizer(problem, layout)
+        self.mounts = problem.mounts(layout.measurements)
 
     @property
     def dimension(self) -> int:
@@ -446,7 +448,7 @@ class AssociationSystem:
         n, k = self.n_poses, self.n_objects
         lay = self.layout
         obj = objects[lay.object_of]
-        pred = predict_reduced(poses[lay.pose_of], obj[:, :3], obj[:, 3:], self.problem.mount)
+        pred = predict_reduced(poses[lay.pose_of], obj[:, :3], obj[:, 3:], self.mounts)
         if not np.all(pred.valid):
             return Linearization(cost=np.inf, valid=False)
         sl = pred.values - self.z

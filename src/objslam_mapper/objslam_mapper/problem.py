@@ -32,20 +32,25 @@ out and counted (``rejected_slice_count``, ``rejected_image_count``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_mapper.camera import CameraMount
+from objslam_mapper.camera import CameraMount, CameraMounts
 from objslam_mapper.catalog import Catalog, ObjectClass
 from objslam_mapper.graph_config import GraphConfig, SliceNoiseConfig, SolverConfig
 from objslam_mapper.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.records import ImageSlices, OdometrySample
 from objslam_mapper.slice_model import ELEVATION_BOTTOM
 from objslam_mapper.trajectory import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
+
+if TYPE_CHECKING:
+    from objslam_mapper.keyframes import KeyframeGraph
 
 logger = logging.getLogger(__name__)
 
@@ -59,7 +64,8 @@ class GraphError(ValueError):
     """Inputs that do not make a factor graph (bad groups, no usable poses)."""
 
 
-def _readonly(array: NDArray) -> NDArray:
+def read_only(array: NDArray) -> NDArray:
+    """A contiguous, read-only view of ``array`` (every array of a problem is one)."""
     array = np.ascontiguousarray(array)
     array.flags.writeable = False
     return array
@@ -104,6 +110,9 @@ class GraphProblem:
     prior_log_normalizer: NDArray[np.float64]  # (P,) per prior row
     rejected_image_count: int = 0
     rejected_slice_count: int = 0
+    # Per-measurement camera mounts relative to measurement_pose; None: ``mount`` for all
+    # (the image problem). A keyframe graph's slices of other images have their own.
+    measurement_mount: CameraMounts | None = None
 
     @property
     def pose_count(self) -> int:
@@ -121,6 +130,17 @@ class GraphProblem:
     def label_of(self, measurement: int) -> str:
         return self.labels[int(self.measurement_label[measurement])]
 
+    def mounts(self, measurements: NDArray[np.int64]) -> CameraMount | CameraMounts:
+        """The camera mounts of ``measurements`` relative to their poses (for the slice model)."""
+        return self.mount if self.measurement_mount is None else self.measurement_mount.take(measurements)
+
+    @functools.cached_property
+    def keyframes(self) -> KeyframeGraph:
+        """The graph the solvers work on: one pose per keyframe (:mod:`objslam_mapper.keyframes`)."""
+        from objslam_mapper.keyframes import keyframe_graph  # it builds GraphProblems
+
+        return keyframe_graph(self, self.solver.keyframes)
+
 
 def with_extra_priors(
     problem: GraphProblem, mean: NDArray[np.float64], stddev: NDArray[np.float64]
@@ -131,9 +151,9 @@ def with_extra_priors(
     stddev = np.concatenate([problem.prior_stddev, np.asarray(stddev, dtype=float).reshape(-1, OBJECT_DIM)])
     extended = dataclasses.replace(
         problem,
-        prior_mean=_readonly(mean),
-        prior_stddev=_readonly(stddev),
-        prior_log_normalizer=_readonly(gaussian_log_normalizer(stddev)),
+        prior_mean=read_only(mean),
+        prior_stddev=read_only(stddev),
+        prior_log_normalizer=read_only(gaussian_log_normalizer(stddev)),
     )
     return extended, first
 
@@ -222,29 +242,29 @@ def build_problem(
         mount=mount,
         solver=config.solver,
         labels=tuple(c.label for c in classes),
-        stamps_ns=_readonly(stamps[at.accepted]),
-        pose_image=_readonly(pose_image.astype(np.int64)),
-        odometry_poses=_readonly(poses),
-        increments=_readonly(increments),
-        increment_stddev=_readonly(inc_stddev),
-        first_pose_stddev=_readonly(first_stddev),
-        increment_path_length_m=_readonly(np.abs(np.diff(at.path_length_m))),
-        calibration_prior_stddev=_readonly(calib_stddev),
-        measurements=_readonly(np.array(rows, dtype=float).reshape(-1, 4)),
-        measurement_stddev=_readonly(meas_stddev),
-        measurement_pose=_readonly(np.array(pose_of, dtype=np.int64)),
-        measurement_label=_readonly(np.array(label_of, dtype=np.int64)),
-        measurement_confidence=_readonly(np.array(confidence, dtype=float)),
-        measurement_image=_readonly(np.array(image_of, dtype=np.int64)),
-        measurement_slot=_readonly(np.array(slot_of, dtype=np.int64)),
-        prior_mean=_readonly(prior_mean.reshape(-1, OBJECT_DIM)),
-        prior_stddev=_readonly(prior_stddev.reshape(-1, OBJECT_DIM)),
+        stamps_ns=read_only(stamps[at.accepted]),
+        pose_image=read_only(pose_image.astype(np.int64)),
+        odometry_poses=read_only(poses),
+        increments=read_only(increments),
+        increment_stddev=read_only(inc_stddev),
+        first_pose_stddev=read_only(first_stddev),
+        increment_path_length_m=read_only(np.abs(np.diff(at.path_length_m))),
+        calibration_prior_stddev=read_only(calib_stddev),
+        measurements=read_only(np.array(rows, dtype=float).reshape(-1, 4)),
+        measurement_stddev=read_only(meas_stddev),
+        measurement_pose=read_only(np.array(pose_of, dtype=np.int64)),
+        measurement_label=read_only(np.array(label_of, dtype=np.int64)),
+        measurement_confidence=read_only(np.array(confidence, dtype=float)),
+        measurement_image=read_only(np.array(image_of, dtype=np.int64)),
+        measurement_slot=read_only(np.array(slot_of, dtype=np.int64)),
+        prior_mean=read_only(prior_mean.reshape(-1, OBJECT_DIM)),
+        prior_stddev=read_only(prior_stddev.reshape(-1, OBJECT_DIM)),
         trajectory_log_normalizer=trajectory_norm,
-        measurement_log_normalizer=_readonly(gaussian_norm + inlier_log_weight(noise.outlier_probability)),
-        measurement_outlier_cost=_readonly(
+        measurement_log_normalizer=read_only(gaussian_norm + inlier_log_weight(noise.outlier_probability)),
+        measurement_outlier_cost=read_only(
             outlier_cost(gaussian_norm, noise.outlier_probability, noise.outlier_volume_rad4)
         ),
-        prior_log_normalizer=_readonly(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
+        prior_log_normalizer=read_only(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
         rejected_image_count=at.rejected_count,
         rejected_slice_count=rejected_slices,
     )

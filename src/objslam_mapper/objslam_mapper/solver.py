@@ -57,6 +57,7 @@ from numpy.typing import ArrayLike, NDArray
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.initialization import initial_object
+from objslam_mapper.keyframes import KeyframeGraph
 from objslam_mapper.normal_equations import (
     AssociationSystem,
     Factorization,
@@ -97,7 +98,7 @@ class GraphSolution:
     ``object_of_measurement`` (M,) gives each measurement's object number, -1 if none.
     """
 
-    map_T_base: NDArray[np.float64]  # (N, 3)
+    map_T_base: NDArray[np.float64]  # (N, 3): every image's pose (objslam_mapper.keyframes)
     objects: tuple[ObjectEstimate, ...]
     object_of_measurement: NDArray[np.int64]
     iterations: int
@@ -118,13 +119,19 @@ def initial_calibration(problem: GraphProblem, warm_start: GraphSolution | None)
     return np.zeros(problem.calibration_dim)
 
 
-def initial_state(problem: GraphProblem, layout: Layout, warm_start: GraphSolution | None) -> tuple[NDArray, NDArray]:
+def initial_state(
+    keyframes: KeyframeGraph, layout: Layout, warm_start: GraphSolution | None
+) -> tuple[NDArray, NDArray]:
+    """Starting graph poses and objects of a solve of ``keyframes.problem`` (``layout`` is over it)."""
+    problem = keyframes.problem
     if warm_start is None:
         poses = np.array(problem.odometry_poses)
     else:
-        poses = np.array(warm_start.map_T_base, dtype=float)
-        if poses.shape != problem.odometry_poses.shape:
-            raise GraphError(f"warm start has {len(poses)} poses, the problem {problem.pose_count}")
+        if len(warm_start.map_T_base) != len(keyframes.pose_keyframe):
+            raise GraphError(
+                f"warm start has {len(warm_start.map_T_base)} poses, the problem {len(keyframes.pose_keyframe)}"
+            )
+        poses = keyframes.restrict(warm_start.map_T_base)
     objects = np.empty((len(layout.groups), OBJECT_DIM))
     for j, group in enumerate(layout.groups):
         owners = warm_start.object_of_measurement[group] if warm_start is not None else group[:0]
@@ -148,7 +155,7 @@ def initial_state(problem: GraphProblem, layout: Layout, warm_start: GraphSoluti
 
 def _nearest_camera(problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray) -> NDArray:
     """(K,) horizontal distance from each object's axis to the nearest camera that saw it."""
-    cam_x, cam_y = camera_positions(poses[layout.pose_of], problem.mount)
+    cam_x, cam_y = camera_positions(poses[layout.pose_of], problem.mounts(layout.measurements))
     obj = objects[layout.object_of]
     nearest = np.full(len(objects), np.inf)
     np.minimum.at(nearest, layout.object_of, np.hypot(obj[:, 0] - cam_x, obj[:, 1] - cam_y))
@@ -175,9 +182,11 @@ def solve(
     the evidence at its last iterate, which is below that of the optimum up to the
     log-determinant.
     """
+    keyframes = problem.keyframes
+    problem = keyframes.problem  # from here on the graph's: one pose per keyframe
     layout = layout_of(problem, groups, priors)
     graph = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
-    poses, objects = initial_state(problem, layout, warm_start)
+    poses, objects = initial_state(keyframes, layout, warm_start)
     calib = initial_calibration(problem, warm_start)
 
     # Phases of graduated outlier caps (objslam_mapper.outliers), each with the iteration
@@ -189,7 +198,7 @@ def solve(
     lin = graph.linearize(poses, objects, calib)
     if not lin.valid:
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
-        return make_solution(problem, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
+        return make_solution(keyframes, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
     iterations, state = 0, (poses, objects, calib)
     for phase, scale in enumerate(schedule):
@@ -210,7 +219,7 @@ def solve(
     covariance = graph.object_covariance(final) if with_covariances else None
     calib_cov = graph.calibration_covariance(final) if with_covariances else None
     return make_solution(
-        problem,
+        keyframes,
         layout,
         poses,
         objects,
@@ -280,7 +289,7 @@ def _minimize(
 
 
 def make_solution(
-    problem: GraphProblem,
+    keyframes: KeyframeGraph,
     layout: Layout,
     poses: NDArray,
     objects: NDArray,
@@ -293,6 +302,8 @@ def make_solution(
     calibration: NDArray | None = None,
     calibration_cov: NDArray | None = None,
 ) -> GraphSolution:
+    """The solution of a solve of ``keyframes.problem`` that ended at graph poses ``poses``."""
+    problem = keyframes.problem
     estimates = tuple(
         ObjectEstimate(
             label=problem.labels[int(layout.labels[j])],
@@ -307,10 +318,11 @@ def make_solution(
     object_of = np.full(problem.measurement_count, -1, dtype=np.int64)
     object_of[layout.measurements] = layout.object_of
     calibration = np.zeros(problem.calibration_dim) if calibration is None else np.array(calibration, dtype=float)
-    for array in (poses, objects, object_of, calibration):
+    map_T_base = keyframes.expand(poses)
+    for array in (map_T_base, objects, object_of, calibration):
         array.flags.writeable = False
     return GraphSolution(
-        map_T_base=poses,
+        map_T_base=map_T_base,
         objects=estimates,
         object_of_measurement=object_of,
         iterations=iterations,
