@@ -20,6 +20,7 @@ from objslam_mapper.inference import (
     clear_start_objects,
     infer_map,
     initial_association,
+    recall_start_clutter,
 )
 from objslam_mapper.sampler import ExactDistribution, MetropolisHastings, MoveConfig
 from objslam_mapper.solver import solve
@@ -270,6 +271,33 @@ def test_a_start_object_made_of_a_patch_seen_twice_is_cleared_to_clutter():
     assert moved == blue
     assert set(cleared.clutter) == set(blue) and cleared.n_objects == 1
     assert target(cleared) > target(joined)
+
+
+def test_start_tracklets_left_in_clutter_join_their_object_and_a_poster_stays():
+    """The start left one red tracklet in clutter (as a short look alone may be): the greedy
+    pass puts it into its object. The poster's tracklet is offered to the green object
+    (within reach at 5 m) and stays clutter: the target prefers it there."""
+    run = simulate()
+    problem = problem_of(run, with_poster(run))
+    chained = tracklets_of_problem(problem)
+    target = AssociationTarget(problem, chained.tracklets, ClutterConfig(), detection=QUICK.detection)
+
+    def owner(tracklet):
+        m = tracklet.measurement_indices[0]
+        image, slot = problem.measurement_image[m], problem.measurement_slot[m]
+        return run.slice_object[image][slot] if slot < len(run.slice_object[image]) else CLUTTER
+
+    truth = Association.of([owner(tr) for tr in chained.tracklets])
+    poster = truth.clutter
+    assert len(poster) == 1
+    red = [t for t, tr in enumerate(chained.tracklets) if tr.label == "red"]
+    left_out = max(red)  # a later look at one of the red objects
+    start = Association.of([CLUTTER if t == left_out else a for t, a in enumerate(truth.assignment)])
+    recalled, moved = recall_start_clutter(target, start, max_distance_m=5.0)
+    assert moved == [left_out]
+    assert recalled == truth and target(recalled) > target(start)
+    # Already right: nothing moves.
+    assert recall_start_clutter(target, truth, max_distance_m=5.0) == (truth, [])
 
 
 def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
