@@ -18,6 +18,7 @@ from objslam_mapper.problem import build_problem, gaussian_log_normalizer
 from objslam_mapper.slice_model import predict_reduced
 from objslam_mapper.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, office_scene, simulate_run
+from objslam_mapper.trajectory import increment_stddev
 
 CATALOG = load_catalog()
 KEYFRAMES = KeyframeConfig(min_travel_m=0.05, min_turn_rad=0.05)
@@ -127,12 +128,15 @@ def test_the_graph_of_a_dense_run_has_a_pose_per_keyframe(dense):
     np.testing.assert_array_equal(graph.stamps_ns, problem.stamps_ns[kf.keyframe_pose])
     # Image poses are their keyframe's with the odometry between: exact on the odometry itself.
     np.testing.assert_allclose(kf.expand(kf.restrict(problem.odometry_poses)), problem.odometry_poses, atol=1e-12)
-    # The random walk between keyframes: the variances of its increments summed, and the
-    # trajectory's normalizer that of these factors.
+    # The random walk between keyframes: the noise model's for its path and turn (one floor,
+    # not one per image: less than the increments' variances summed), and the trajectory's
+    # normalizer that of these factors.
     cut = kf.keyframe_pose
-    np.testing.assert_allclose(
-        graph.increment_stddev[0] ** 2, np.sum(problem.increment_stddev[cut[0] : cut[1]] ** 2, axis=0)
-    )
+    path = problem.increment_path_length_m[cut[0] : cut[1]].sum()
+    turn = np.abs(problem.increments[cut[0] : cut[1], 2]).sum()
+    np.testing.assert_allclose(graph.increment_stddev[0], increment_stddev(path, turn, problem.odometry_noise))
+    summed = np.sum(problem.increment_stddev[cut[0] : cut[1]] ** 2, axis=0)
+    assert np.all(graph.increment_stddev[0] ** 2 < summed)
     np.testing.assert_allclose(graph.increment_path_length_m.sum(), problem.increment_path_length_m[: cut[-1]].sum())
     expected = np.sum(gaussian_log_normalizer(graph.increment_stddev)) + gaussian_log_normalizer(
         graph.first_pose_stddev
@@ -148,10 +152,15 @@ def test_the_graph_of_a_dense_run_has_a_pose_per_keyframe(dense):
     np.testing.assert_array_equal(graph.measurement_pose, kf.pose_keyframe[problem.measurement_pose])
 
 
-def test_without_keyframes_the_graph_is_the_image_problem(dense):
+def test_without_keyframes_or_a_worthwhile_reduction_the_graph_is_the_image_problem(dense):
     _run, problem = dense
-    off = dataclasses.replace(problem, solver=SolverConfig(keyframes=KeyframeConfig(enabled=False)))
-    assert off.keyframes.problem is off and not off.keyframes.reduces
+    removed = 1.0 - problem.keyframes.problem.pose_count / problem.pose_count
+    for keyframes in (KeyframeConfig(enabled=False), KeyframeConfig(min_reduction=removed + 0.01)):
+        other = dataclasses.replace(problem, solver=SolverConfig(keyframes=keyframes))
+        assert other.keyframes.problem is other and not other.keyframes.reduces
+        np.testing.assert_array_equal(other.keyframes.pose_keyframe, np.arange(problem.pose_count))
+    just = dataclasses.replace(problem, solver=SolverConfig(keyframes=KeyframeConfig(min_reduction=removed - 0.01)))
+    assert just.keyframes.reduces
 
 
 @pytest.mark.parametrize("seed", [3, 4])

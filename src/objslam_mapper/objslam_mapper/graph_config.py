@@ -152,9 +152,10 @@ class KeyframeConfig:
     An image becomes a keyframe once the odometry has travelled ``min_travel_m`` or turned
     ``min_turn_rad`` since the last keyframe; the images between are tied to the keyframe
     before them by their odometry (its noise added to their slices'). The graph then
-    grows with the path, not with the frame rate. The defaults are below the motion
-    between the bundled bags' images (about 8 cm), so there only images taken while the
-    robot (nearly) stands share a pose.
+    grows with the path, not with the frame rate. Only when that removes at least
+    ``min_reduction`` of the poses: at the bundled bags' rate (about 8 cm between images)
+    it would only join the few images taken while the robot stands, and there one pose per
+    image is kept, as the paper has it.
     """
 
     enabled: bool = setting(True, "tie images taken close together to one graph pose (false: one pose per image)")
@@ -162,6 +163,13 @@ class KeyframeConfig:
         0.05, "an image is a keyframe once the robot has travelled this far since the last keyframe (m)", minimum=0.0
     )
     min_turn_rad: float = setting(0.05, "... or turned this much (rad)", minimum=0.0)
+    min_reduction: float = setting(
+        0.25,
+        "keyframes are used only when they remove at least this share of the poses (else one pose per image: "
+        "a small gain is not worth the approximation)",
+        minimum=0.0,
+        maximum=1.0,
+    )
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 from objslam_mapper.camera import CameraMount, CameraMounts
 from objslam_mapper.catalog import Catalog, ObjectClass
-from objslam_mapper.graph_config import GraphConfig, SliceNoiseConfig, SolverConfig
+from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
 from objslam_mapper.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.records import ImageSlices, OdometrySample
 from objslam_mapper.slice_model import ELEVATION_BOTTOM
@@ -113,6 +113,8 @@ class GraphProblem:
     # Per-measurement camera mounts relative to measurement_pose; None: ``mount`` for all
     # (the image problem). A keyframe graph's slices of other images have their own.
     measurement_mount: CameraMounts | None = None
+    # The odometry noise model the increments' stddevs come from (keyframes compose them).
+    odometry_noise: OdometryNoiseConfig = OdometryNoiseConfig()
 
     @property
     def pose_count(self) -> int:
@@ -267,6 +269,7 @@ def build_problem(
         prior_log_normalizer=read_only(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
         rejected_image_count=at.rejected_count,
         rejected_slice_count=rejected_slices,
+        odometry_noise=config.odometry,
     )
     logger.info(
         "factor graph: %d poses, %d measurements of %d classes (%d images, %d slices left out)",
