@@ -154,7 +154,10 @@ class SamplerConfig:
     )
     detection: DetectionConfig = setting(DetectionConfig(), "detection probability and visibility of objects")
     initial_clutter: bool = setting(
-        True, "start state: a tracklet the target prefers as clutter over a lone object starts in clutter"
+        True,
+        "start state: a tracklet the target prefers as clutter over a lone object starts in clutter, then start "
+        "objects the target prefers as clutter go there, each clutter tracklet is tried once in its nearest object, "
+        "and the objects are tried as clutter again (false: the plain nearest-neighbour start)",
     )
     proposal_max_iterations: int = setting(15, "most solver linearizations per proposed association", minimum=1)
     solution_cache_size: int = setting(256, "graph solutions kept for warm starts and map building", minimum=1)
