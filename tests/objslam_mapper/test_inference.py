@@ -197,7 +197,7 @@ def test_build_map_runs_the_pipeline_deterministically():
     assert [p.stamp_ns for p in built.trajectory] == [im.stamp_ns for im in run.images]
     assert np.abs(built.trajectory_array()[:, :2] - run.true_map_T_base[:, :2]).max() < 0.3
     diagnostics = built.diagnostics
-    for key in ("samples", "burn_in", "acceptance_rates", "distinct_associations_visited", "tracklets"):
+    for key in ("samples", "burn_in", "acceptance_rates", "distinct_associations_visited", "tracklets", "graph_poses"):
         assert key in diagnostics
     assert diagnostics["samples"] == 500 and diagnostics["kept_samples"] == 350
 

@@ -639,6 +639,7 @@ def infer_map(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgr
     diagnostics: dict[str, Any] = {
         "seed": config.seed,
         "poses": problem.pose_count,
+        "graph_poses": problem.keyframes.problem.pose_count,  # objslam_mapper.keyframes
         "measurements": problem.measurement_count,
         "rejected_images": problem.rejected_image_count,
         "rejected_slices": problem.rejected_slice_count,
