@@ -517,6 +517,33 @@ class AssociationTarget:
         )
 
 
+def _centroid(tracklets: Sequence[Tracklet], group: Sequence[int]) -> NDArray[np.float64]:
+    """Rough xy of an object: its tracklets' positions weighted by their slice counts."""
+    weights = np.array([len(tracklets[u]) for u in group], dtype=float)
+    return weights @ np.array([tracklets[u].position_xy_m for u in group]) / weights.sum()
+
+
+def _nearest_object(
+    tracklet: Tracklet,
+    labels: Sequence[str],
+    centroids: Sequence[NDArray[np.float64]],
+    frames: Sequence[set[int]],
+    max_distance_m: float,
+) -> int | None:
+    """The object (by its label, centroid and images) of ``tracklet``'s class nearest to it
+    within ``max_distance_m`` and not seen in the same images, or None."""
+    xy = np.asarray(tracklet.position_xy_m)
+    seen = set(tracklet.frame_indices)
+    best, best_d = None, max_distance_m
+    for j, (label, centroid, images) in enumerate(zip(labels, centroids, frames, strict=True)):
+        if label != tracklet.label or images & seen:
+            continue
+        d = float(np.hypot(*(centroid - xy)))
+        if d <= best_d:
+            best, best_d = j, d
+    return best
+
+
 def initial_association(
     tracklets: Sequence[Tracklet], max_distance_m: float, clutter: Collection[int] = ()
 ) -> Association:
@@ -524,6 +551,7 @@ def initial_association(
     whose centroid is within ``max_distance_m`` and that was not seen in the same images;
     the tracklets in ``clutter`` start as clutter."""
     members: list[list[int]] = []
+    labels: list[str] = []
     centroids: list[NDArray[np.float64]] = []
     frames: list[set[int]] = []
     order = sorted(
@@ -531,25 +559,31 @@ def initial_association(
     )
     for t in order:
         tr = tracklets[t]
-        xy = np.asarray(tr.position_xy_m)
-        best, best_d = None, max_distance_m
-        for j, group in enumerate(members):
-            if tracklets[group[0]].label != tr.label or frames[j] & set(tr.frame_indices):
-                continue
-            d = float(np.hypot(*(centroids[j] - xy)))
-            if d <= best_d:
-                best, best_d = j, d
+        best = _nearest_object(tr, labels, centroids, frames, max_distance_m)
         if best is None:
             members.append([t])
-            centroids.append(xy)
+            labels.append(tr.label)
+            centroids.append(np.asarray(tr.position_xy_m))
             frames.append(set(tr.frame_indices))
         else:
             members[best].append(t)
-            weights = np.array([len(tracklets[u]) for u in members[best]], dtype=float)
-            points = np.array([tracklets[u].position_xy_m for u in members[best]])
-            centroids[best] = weights @ points / weights.sum()
+            centroids[best] = _centroid(tracklets, members[best])
             frames[best] |= set(tr.frame_indices)
     return Association.from_groups(len(tracklets), members)
+
+
+def _take_if_better(
+    target: AssociationTarget, state: Association, value: float, candidate: Association, screen_margin_nats: float
+) -> tuple[Association, float, bool]:
+    """``candidate`` and its target value if the target prefers it to ``state`` (worth ``value``),
+    else ``state``; a candidate the screen judges worse by more than the margin is not solved."""
+    if target.screen(state, candidate) < -screen_margin_nats:
+        return state, value, False
+    candidate_value = target(candidate)
+    if candidate_value > value:
+        target.move_to(candidate)
+        return candidate, candidate_value, True
+    return state, value, False
 
 
 def clear_start_objects(
@@ -570,14 +604,9 @@ def clear_start_objects(
     current = target(state)
     target.move_to(state)  # the candidates differ from it by one object: warm starts
     for group in sorted(state.groups, key=lambda g: (sum(len(target.tracklets[t]) for t in g), g)):
-        assignment = [CLUTTER if t in group else a for t, a in enumerate(state.assignment)]
-        candidate = Association.of(assignment)
-        if target.screen(state, candidate) < -screen_margin_nats:
-            continue
-        value = target(candidate)
-        if value > current:
-            state, current = candidate, value
-            target.move_to(state)
+        candidate = Association.of([CLUTTER if t in group else a for t, a in enumerate(state.assignment)])
+        state, current, taken = _take_if_better(target, state, current, candidate, screen_margin_nats)
+        if taken:
             moved.extend(group)
     return state, sorted(moved)
 
@@ -604,26 +633,19 @@ def recall_start_clutter(
     current = target(state)
     target.move_to(state)
     for t in sorted(state.clutter, key=lambda u: (-len(tracklets[u]), u)):
-        tr = tracklets[t]
-        frames = set(tr.frame_indices)
-        best, best_d = None, max_distance_m
-        for j, group in enumerate(state.groups):
-            if tracklets[group[0]].label != tr.label or any(frames & set(tracklets[u].frame_indices) for u in group):
-                continue
-            weights = np.array([len(tracklets[u]) for u in group], dtype=float)
-            centroid = weights @ np.array([tracklets[u].position_xy_m for u in group]) / weights.sum()
-            d = float(np.hypot(*(centroid - np.asarray(tr.position_xy_m))))
-            if d <= best_d:
-                best, best_d = j, d
+        groups = state.groups
+        best = _nearest_object(
+            tracklets[t],
+            [tracklets[g[0]].label for g in groups],
+            [_centroid(tracklets, g) for g in groups],
+            [{f for u in g for f in tracklets[u].frame_indices} for g in groups],
+            max_distance_m,
+        )
         if best is None:
             continue
         candidate = Association.of([best if u == t else a for u, a in enumerate(state.assignment)])
-        if target.screen(state, candidate) < -screen_margin_nats:
-            continue
-        value = target(candidate)
-        if value > current:
-            state, current = candidate, value
-            target.move_to(state)
+        state, current, taken = _take_if_better(target, state, current, candidate, screen_margin_nats)
+        if taken:
             moved.append(t)
     return state, sorted(moved)
 
