@@ -3,8 +3,9 @@
 Usage: python scripts/aligned_covariance.py BAG [--params FILE]
 
 `objslam eval` aligns the map to the ground truth by a least-squares SE(2) fit of the
-trajectory before it measures object errors, while a map's covariances are marginals in
-the frame of its first pose. This script solves the ground-truth association of BAG once,
+trajectory before it measures object errors; a map's covariances are about the trajectory
+(objslam_mapper.gauge) for that reason, where the graph's plain marginals are anchored at
+its first pose. This script solves the ground-truth association of BAG once,
 takes the joint covariance of all poses and objects from the solver's (sparse) normal
 equations, and propagates it through the linearized trajectory fit: the covariance of
 exactly the error `objslam eval` measures. Per object it prints that error, the map's
@@ -27,6 +28,7 @@ from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.config import default_config_dir, load_config
+from objslam_mapper.gauge import object_motion, trajectory_gauge
 from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
 from objslam_mapper.pipeline import MapperConfig
 from objslam_mapper.problem import build_problem
@@ -53,18 +55,13 @@ def joint_covariance(problem, groups, solution) -> np.ndarray:
 def alignment_jacobian(track_xy: np.ndarray, point_xy: np.ndarray, n_variables: int, column: int) -> np.ndarray:
     """(2, n) map from the state error to a point's error after the trajectory fit (linearized).
 
-    The fit removes the mean of the pose errors and their rotation about the trajectory's
-    centre: point error = d_point - mean(d_i) - w J (point - c), w = sum (J p_i) . d_i / sum |p_i|^2.
+    The package's own gauge (objslam_mapper.gauge), written out over the whole state:
+    the point's error less the rigid motion fitted to the pose errors, ``E - M G``.
     """
-    centre = track_xy.mean(axis=0)
-    centred = track_xy - centre
-    perp = np.array([[0.0, -1.0], [1.0, 0.0]])
+    gauge = trajectory_gauge(track_xy)
     jacobian = np.zeros((2, n_variables))
-    jacobian[:, column : column + 2] = np.eye(2)
-    arm = perp @ (point_xy - centre)
-    spin = (centred @ perp.T) / float((centred**2).sum())  # (N, 2): d w / d d_i
-    for i in range(len(track_xy)):
-        jacobian[:, POSE_DIM * i : POSE_DIM * i + 2] -= np.eye(2) / len(track_xy) + np.outer(arm, spin[i])
+    jacobian[:, : gauge.rows.shape[1]] = -object_motion(point_xy[None], gauge.centroid_xy, 2)[0] @ gauge.rows
+    jacobian[:, column : column + 2] += np.eye(2)
     return jacobian
 
 
@@ -119,7 +116,8 @@ def main() -> None:
             f"{np.array2string(np.sqrt(np.linalg.eigvalsh(marginal)), precision=3):>15s}  "
             f"{np.array2string(np.sqrt(values), precision=3):>15s}  {cos:12.2f}  {np.linalg.norm(radial):10.1f}"
         )
-    for name, values in (("marginal (as in the map)", marginal_nees), ("aligned (as objslam eval errs)", aligned_nees)):
+    ways = (("marginal, first pose anchored", marginal_nees), ("about the trajectory (as in the map)", aligned_nees))
+    for name, values in ways:
         summary = nees_summary(values, 2)
         print(f"  mean NEES xy, {name}: {summary.mean:.2f}  95 % band [{summary.band[0]:.2f}, {summary.band[1]:.2f}]")
     # All objects at once with their correlations: one chi-square of 2K degrees of freedom.

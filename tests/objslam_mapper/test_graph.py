@@ -16,7 +16,7 @@ from scipy.special import logsumexp
 from scipy.stats import chi2
 
 from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import between, wrap_angle
+from objslam_mapper.geometry import between, rotation, transform_points, wrap_angle
 from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
 from objslam_mapper.gtsam_backend import build_gtsam_graph
 from objslam_mapper.initialization import initial_object
@@ -25,6 +25,7 @@ from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.slice_model import predict_slices, slice_error
 from objslam_mapper.solver import solve
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
+from objslam_tools.trajectory import fit_se2
 
 CATALOG = load_catalog()
 CONFIG = GraphConfig()
@@ -252,9 +253,14 @@ def test_object_positions_are_consistent_nees():
         problem = build_problem(run.odometry, run.images, MOUNT, CATALOG, CONFIG)
         solution = solve(problem, run.groups(problem), with_covariances=True)
         assert solution.converged
+        # Covariances are about the trajectory: errors are measured after fitting it, as objslam eval does.
+        gt_T_map = fit_se2(solution.map_T_base[:, :2], run.true_map_T_base[:, :2])
+        rotate = np.eye(3)
+        rotate[:2, :2] = rotation(gt_T_map[2])
         for j, obj in zip(run.seen_objects(), solution.objects, strict=True):
-            error = obj.location_m - np.array(run.objects[j].location_m)
-            nees.append(error @ np.linalg.solve(obj.location_cov, error))
+            location = np.r_[transform_points(gt_T_map, obj.location_m[None, :2])[0], obj.location_m[2]]
+            error = location - np.array(run.objects[j].location_m)
+            nees.append(error @ np.linalg.solve(rotate @ obj.location_cov @ rotate.T, error))
     count = len(nees)
     low, high = chi2.ppf([0.025, 0.975], 3 * count) / count
     assert low < np.mean(nees) < high, (np.mean(nees), low, high)
@@ -335,11 +341,26 @@ def test_laplace_evidence_matches_an_independent_dense_computation(dense_object_
     assert solution.chi2 == pytest.approx(residual @ residual, rel=1e-9)
     assert solution.log_det_information == pytest.approx(log_det, abs=1e-4)
     assert solution.log_evidence == pytest.approx(expected, abs=1e-4)
-    # Marginal covariances are the blocks of the inverse information.
+    # Covariances are those of each object's error less the rigid motion fitted to the
+    # trajectory's (objslam_mapper.gauge), from the inverse information: (E - M G) Lambda^-1 (E - M G)^T.
     cov = np.linalg.inv(info)
     n = 3 * problem.pose_count
-    np.testing.assert_allclose(solution.objects[1].location_cov, cov[n + 5 : n + 8, n + 5 : n + 8], rtol=1e-4)
-    np.testing.assert_allclose(solution.objects[0].size_cov, cov[n + 3 : n + 5, n + 3 : n + 5], rtol=1e-4)
+    xy = solution.map_T_base[:, :2]
+    centred = xy - xy.mean(axis=0)
+    fit = np.zeros((3, len(theta)))  # translation x, y and rotation about the centroid, from the pose errors
+    fit[0, 0:n:3] = fit[1, 1:n:3] = 1.0 / len(xy)
+    fit[2, 0:n:3], fit[2, 1:n:3] = -centred[:, 1], centred[:, 0]
+    fit[2] /= np.sum(centred**2)
+    for j, obj in enumerate(solution.objects):
+        lever = obj.location_m[:2] - xy.mean(axis=0)
+        functional = -np.array([[1.0, 0.0, -lever[1]], [0.0, 1.0, lever[0]], [0.0, 0.0, 0.0]]) @ fit
+        functional[:, n + 5 * j : n + 5 * j + 3] += np.eye(3)
+        np.testing.assert_allclose(obj.location_cov, functional @ cov @ functional.T, rtol=1e-4, atol=1e-12)
+        size = slice(n + 5 * j + 3, n + 5 * j + 5)
+        np.testing.assert_allclose(obj.size_cov, cov[size, size], rtol=1e-4)
+    # Anchored at the first pose instead, the marginals are larger: the drift on the way is a gauge choice.
+    far = solution.objects[1]
+    assert np.trace(far.location_cov[:2, :2]) < np.trace(cov[n + 5 : n + 7, n + 5 : n + 7])
 
 
 def batch_log_joint(problem, groups, thetas):

@@ -61,6 +61,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from objslam_mapper.gauge import GAUGE_DIM, about_trajectory, object_motion, trajectory_gauge
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.normal_equations import (
@@ -545,6 +546,9 @@ def solve_gtsam(
         )
         calib_cov = marginals.marginalCovariance(keys.calibration()) if keys.calibration_dim else np.zeros((0, 0))
     poses, objects = keys.from_values(driven.values)
+    if covariance is not None and len(covariance) and problem.pose_count > 1:
+        images_per_pose = np.bincount(keyframes.pose_keyframe, minlength=problem.pose_count).astype(float)
+        covariance = _about_trajectory(final.graph, keys, poses, objects, images_per_pose, covariance)
     return make_solution(
         keyframes,
         layout,
@@ -559,6 +563,37 @@ def solve_gtsam(
         keys.calibration_of(driven.values),
         calib_cov,
     )
+
+
+def _about_trajectory(
+    linear: gtsam.GaussianFactorGraph,
+    keys: GtsamKeys,
+    poses: NDArray[np.float64],
+    objects: NDArray[np.float64],
+    pose_weights: NDArray[np.float64],
+    marginals: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Object covariances about the trajectory (:mod:`objslam_mapper.gauge`) from GTSAM's linear graph.
+
+    GTSAM perturbs a Pose2 in its own frame (first order: world ``δt = R(θ) δt_body``), so
+    the gauge's rows are taken through each pose's rotation before the solve.
+    """
+    ordering = gtsam.Ordering()
+    all_keys = [*keys.pose_keys, *keys.object_keys] + ([keys.calibration()] if keys.calibration_dim else [])
+    for key in all_keys:
+        ordering.push_back(key)
+    information, _ = linear.hessian(ordering)
+    gauge = trajectory_gauge(poses[:, :2], pose_weights)
+    cos, sin = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    world_x, world_y = gauge.rows[:, 0::3], gauge.rows[:, 1::3]
+    rows = np.zeros((GAUGE_DIM, len(information)))
+    rows[:, 0 : POSE_DIM * len(poses) : 3] = world_x * cos + world_y * sin
+    rows[:, 1 : POSE_DIM * len(poses) : 3] = -world_x * sin + world_y * cos
+    solved = np.linalg.solve(information, rows.T)
+    split = POSE_DIM * len(poses)
+    object_gauge_cov = solved[split : split + OBJECT_DIM * len(objects)].reshape(len(objects), OBJECT_DIM, GAUGE_DIM)
+    motion = object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM)
+    return about_trajectory(marginals, object_gauge_cov, rows @ solved, motion)
 
 
 def time_naive_solves(

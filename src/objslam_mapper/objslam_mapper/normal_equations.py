@@ -51,6 +51,7 @@ import scipy.sparse.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
+from objslam_mapper.gauge import about_trajectory, object_motion, trajectory_gauge
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.outliers import (
     COLD_START_CAP_SCALES,
@@ -138,6 +139,8 @@ class Factorization:
     predicted_decrease: float
     step_calib: NDArray[np.float64]  # (C,)
     chol_schur: NDArray[np.float64] | None = None  # dense path: upper Cholesky factor of S (objects, then c)
+    chol_pose: NDArray[np.float64] | None = None  # dense path: banded upper Cholesky factor U of the pose block
+    w_cross: NDArray[np.float64] | None = None  # dense path: W = U^-T B
     sparse_lu: scipy.sparse.linalg.SuperLU | None = None  # sparse path
 
 
@@ -569,7 +572,14 @@ class AssociationSystem:
         if info != 0:
             raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
         return Factorization(
-            log_det, -back[:, 0], step_dense[:n_object_vars], 0.0, step_dense[n_object_vars:], chol_schur=chol_schur
+            log_det,
+            -back[:, 0],
+            step_dense[:n_object_vars],
+            0.0,
+            step_dense[n_object_vars:],
+            chol_schur=chol_schur,
+            chol_pose=chol_pose,
+            w_cross=w_cross,
         )
 
     def _factorize_sparse(self, lin: Linearization, damping: float) -> Factorization:
@@ -619,6 +629,43 @@ class AssociationSystem:
         inv = self._dense_inverse_columns(fac, 0, OBJECT_DIM * k)
         blocks = inv.reshape(k, OBJECT_DIM, k, OBJECT_DIM)
         return blocks[np.arange(k), :, np.arange(k), :]
+
+    def solve_pose_rhs(self, fac: Factorization, rhs_pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``Lambda^-1 [rhs_pose; 0]`` for (3N, m) right-hand sides on the poses only (undamped factorization).
+
+        Dense path, with ``z = U^-T r``: dense part ``x_d = -S^-1 W^T z``, poses
+        ``x_p = U^-1 (z - W x_d)``. Rows as in the sparse system: poses, objects, calibration.
+        """
+        rhs_pose = np.asarray(rhs_pose, dtype=float)
+        if fac.sparse_lu is not None:
+            rhs = np.zeros((POSE_DIM * self.n_poses + OBJECT_DIM * self.n_objects + self.n_calib, rhs_pose.shape[1]))
+            rhs[: len(rhs_pose)] = rhs_pose
+            return fac.sparse_lu.solve(rhs)
+        z, info = lapack.dtbtrs(fac.chol_pose, rhs_pose, uplo="U", trans="T")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+        x_dense = np.zeros((fac.w_cross.shape[1], rhs_pose.shape[1]))
+        if fac.chol_schur is not None:
+            x_dense = -scipy.linalg.cho_solve((fac.chol_schur, False), fac.w_cross.T @ z, check_finite=False)
+        x_pose, info = lapack.dtbtrs(fac.chol_pose, z - fac.w_cross @ x_dense, uplo="U", trans="N")
+        if info != 0:
+            raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+        return np.concatenate([x_pose, x_dense])
+
+    def object_covariance_about_trajectory(
+        self, fac: Factorization, map_xy_pose: NDArray[np.float64], pose_weights: NDArray[np.float64], objects: NDArray
+    ) -> NDArray[np.float64]:
+        """(K, 5, 5) object covariances about the trajectory (:mod:`objslam_mapper.gauge`)."""
+        marginals = self.object_covariance(fac)
+        if not self.n_objects or self.n_poses < 2:
+            return marginals
+        gauge = trajectory_gauge(map_xy_pose, pose_weights)
+        solved = self.solve_pose_rhs(fac, gauge.rows.T)  # Lambda^-1 G^T
+        split = POSE_DIM * self.n_poses
+        gauge_cov = gauge.rows @ solved[:split]
+        object_gauge_cov = solved[split : split + OBJECT_DIM * self.n_objects].reshape(self.n_objects, OBJECT_DIM, -1)
+        motion = object_motion(np.asarray(objects)[:, :2], gauge.centroid_xy, OBJECT_DIM)
+        return about_trajectory(marginals, object_gauge_cov, gauge_cov, motion)
 
     def calibration_covariance(self, fac: Factorization) -> NDArray[np.float64]:
         """(C, C) marginal covariance of the odometry calibration (undamped factorization)."""

@@ -25,7 +25,8 @@ its capped cost and no information), with
 information at the MAP (``2 log|R|`` of GTSAM's square-root information). Measurements in no
 group are not part of the graph: the sampler scores them with its clutter model. A new
 object pays its Occam price through its prior's normalizer and its ``5/2 log 2 pi -
-1/2 log|information|``. Object marginal covariances come from the same factorization.
+1/2 log|information|``. Object covariances come from the same factorization, about the
+trajectory as a whole rather than the anchored first pose (:mod:`objslam_mapper.gauge`).
 
 With ``odometry.calibration.enabled`` the state also holds the odometry calibration ``c``
 (distance scale, turn scale, turn bias per metre; one per map, model in
@@ -216,7 +217,10 @@ def solve(
         logger.debug("solve stopped after %d linearizations without converging (cost %.6g)", iterations, lin.cost)
 
     log_evidence = -lin.cost + graph.log_normalizer + 0.5 * graph.dimension * LOG_2PI - 0.5 * final.log_det
-    covariance = graph.object_covariance(final) if with_covariances else None
+    covariance = None
+    if with_covariances:
+        images_per_pose = np.bincount(keyframes.pose_keyframe, minlength=len(poses)).astype(float)
+        covariance = graph.object_covariance_about_trajectory(final, poses[:, :2], images_per_pose, objects)
     calib_cov = graph.calibration_covariance(final) if with_covariances else None
     return make_solution(
         keyframes,
