@@ -70,7 +70,7 @@ def test_covariance_about_the_trajectory_is_that_of_the_error_less_the_fitted_mo
     split = 3 * n_poses
     marginals = np.array([cov[split + 5 * k : split + 5 * k + 5, split + 5 * k : split + 5 * k + 5] for k in range(2)])
     cross = np.array([(cov @ rows.T)[split + 5 * k : split + 5 * k + 5] for k in range(2)])
-    aligned = about_trajectory(marginals, cross, rows @ cov @ rows.T, motion)
+    aligned = about_trajectory(marginals, cross, rows @ cov @ rows.T, objects, gauge.centroid_xy)
     for k in range(n_objects):
         functional = -motion[k] @ rows
         functional[:, split + 5 * k : split + 5 * k + 5] += np.eye(5)

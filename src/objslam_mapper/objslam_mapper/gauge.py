@@ -67,12 +67,20 @@ def object_motion(object_xy: ArrayLike, centroid_xy: ArrayLike, object_dim: int)
 
 
 def about_trajectory(
-    object_cov: ArrayLike, object_gauge_cov: ArrayLike, gauge_cov: ArrayLike, motion: ArrayLike
+    object_cov: ArrayLike,
+    object_gauge_cov: ArrayLike,
+    gauge_cov: ArrayLike,
+    object_xy: ArrayLike,
+    centroid_xy: ArrayLike,
 ) -> NDArray[np.float64]:
-    """(K, D, D) covariances about the trajectory from the marginals (K, D, D), Σ_og (K, D, 3) and Σ_gg (3, 3)."""
+    """(K, D, D) covariances about the trajectory of objects at (K, 2) ``object_xy``.
+
+    From their marginals (K, D, D), ``Σ_og`` (the objects' rows of ``Λ⁻¹ Gᵀ``, (K D, 3)
+    or (K, D, 3)) and ``Σ_gg`` (3, 3) of the gauge about ``centroid_xy``.
+    """
     cov = np.asarray(object_cov, dtype=float)
-    cross = np.asarray(object_gauge_cov, dtype=float)
-    m = np.asarray(motion, dtype=float)
+    cross = np.asarray(object_gauge_cov, dtype=float).reshape(cov.shape[0], cov.shape[1], GAUGE_DIM)
+    m = object_motion(object_xy, centroid_xy, cov.shape[1])
     m_cross = np.einsum("kag,kbg->kab", m, cross)  # M Σ_go
     aligned = cov - m_cross - np.swapaxes(m_cross, 1, 2) + m @ np.asarray(gauge_cov, dtype=float) @ np.swapaxes(m, 1, 2)
     return 0.5 * (aligned + np.swapaxes(aligned, 1, 2))

@@ -61,7 +61,7 @@ import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from objslam_mapper.gauge import GAUGE_DIM, about_trajectory, object_motion, trajectory_gauge
+from objslam_mapper.gauge import GAUGE_DIM, about_trajectory, trajectory_gauge
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.normal_equations import (
@@ -547,8 +547,7 @@ def solve_gtsam(
         calib_cov = marginals.marginalCovariance(keys.calibration()) if keys.calibration_dim else np.zeros((0, 0))
     poses, objects = keys.from_values(driven.values)
     if covariance is not None and len(covariance) and problem.pose_count > 1:
-        images_per_pose = np.bincount(keyframes.pose_keyframe, minlength=problem.pose_count).astype(float)
-        covariance = _about_trajectory(final.graph, keys, poses, objects, images_per_pose, covariance)
+        covariance = _about_trajectory(final.graph, keys, poses, objects, keyframes.images_per_keyframe, covariance)
     return make_solution(
         keyframes,
         layout,
@@ -591,9 +590,8 @@ def _about_trajectory(
     rows[:, 1 : POSE_DIM * len(poses) : 3] = -world_x * sin + world_y * cos
     solved = np.linalg.solve(information, rows.T)
     split = POSE_DIM * len(poses)
-    object_gauge_cov = solved[split : split + OBJECT_DIM * len(objects)].reshape(len(objects), OBJECT_DIM, GAUGE_DIM)
-    motion = object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM)
-    return about_trajectory(marginals, object_gauge_cov, rows @ solved, motion)
+    object_gauge_cov = solved[split : split + OBJECT_DIM * len(objects)]
+    return about_trajectory(marginals, object_gauge_cov, rows @ solved, objects[:, :2], gauge.centroid_xy)
 
 
 def time_naive_solves(

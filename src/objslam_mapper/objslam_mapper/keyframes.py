@@ -104,6 +104,11 @@ class KeyframeGraph:
         """Whether some images share a keyframe (else the graph is the image problem)."""
         return len(self.keyframe_pose) < len(self.pose_keyframe)
 
+    @property
+    def images_per_keyframe(self) -> NDArray[np.float64]:
+        """(K,) how many image poses each graph pose stands for (weights of a fit to the images' trajectory)."""
+        return np.bincount(self.pose_keyframe, minlength=len(self.keyframe_pose)).astype(float)
+
     def restrict(self, map_T_base: ArrayLike) -> NDArray[np.float64]:
         """(K, 3) keyframe poses of (N, 3) image poses."""
         return np.array(np.asarray(map_T_base, dtype=float)[self.keyframe_pose])

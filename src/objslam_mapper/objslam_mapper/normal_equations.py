@@ -51,7 +51,7 @@ import scipy.sparse.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
-from objslam_mapper.gauge import about_trajectory, object_motion, trajectory_gauge
+from objslam_mapper.gauge import about_trajectory, trajectory_gauge
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.outliers import (
     COLD_START_CAP_SCALES,
@@ -662,10 +662,9 @@ class AssociationSystem:
         gauge = trajectory_gauge(map_xy_pose, pose_weights)
         solved = self.solve_pose_rhs(fac, gauge.rows.T)  # Lambda^-1 G^T
         split = POSE_DIM * self.n_poses
+        object_gauge_cov = solved[split : split + OBJECT_DIM * self.n_objects]
         gauge_cov = gauge.rows @ solved[:split]
-        object_gauge_cov = solved[split : split + OBJECT_DIM * self.n_objects].reshape(self.n_objects, OBJECT_DIM, -1)
-        motion = object_motion(np.asarray(objects)[:, :2], gauge.centroid_xy, OBJECT_DIM)
-        return about_trajectory(marginals, object_gauge_cov, gauge_cov, motion)
+        return about_trajectory(marginals, object_gauge_cov, gauge_cov, np.asarray(objects)[:, :2], gauge.centroid_xy)
 
     def calibration_covariance(self, fac: Factorization) -> NDArray[np.float64]:
         """(C, C) marginal covariance of the odometry calibration (undamped factorization)."""

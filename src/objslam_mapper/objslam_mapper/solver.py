@@ -219,8 +219,9 @@ def solve(
     log_evidence = -lin.cost + graph.log_normalizer + 0.5 * graph.dimension * LOG_2PI - 0.5 * final.log_det
     covariance = None
     if with_covariances:
-        images_per_pose = np.bincount(keyframes.pose_keyframe, minlength=len(poses)).astype(float)
-        covariance = graph.object_covariance_about_trajectory(final, poses[:, :2], images_per_pose, objects)
+        covariance = graph.object_covariance_about_trajectory(
+            final, poses[:, :2], keyframes.images_per_keyframe, objects
+        )
     calib_cov = graph.calibration_covariance(final) if with_covariances else None
     return make_solution(
         keyframes,
