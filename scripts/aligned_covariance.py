@@ -5,7 +5,9 @@ Usage: python scripts/aligned_covariance.py BAG [--params FILE]
 `objslam eval` aligns the map to the ground truth by a least-squares SE(2) fit of the
 trajectory before it measures object errors; a map's covariances are about the trajectory
 (objslam_mapper.gauge) for that reason, where the graph's plain marginals are anchored at
-its first pose. This script solves the ground-truth association of BAG once,
+its first pose. This script works with the posterior (the configured noise; a map reports
+the covariance of the estimate's error instead, objslam_mapper.error_covariance): it solves
+the ground-truth association of BAG once,
 takes the joint covariance of all poses and objects from the solver's (sparse) normal
 equations, and propagates it through the linearized trajectory fit: the covariance of
 exactly the error `objslam eval` measures. Per object it prints that error, the map's
@@ -33,11 +35,10 @@ from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSys
 from objslam_mapper.pipeline import MapperConfig
 from objslam_mapper.problem import build_problem
 from objslam_mapper.solver import solve
-from objslam_mapper.tracklets import tracklets_of_problem
 from objslam_tools.bag import open_bag
 from objslam_tools.evaluate import align_track, load_reference, nees_summary
 from objslam_tools.mapper_inputs import detect_bag, odometry_samples
-from objslam_tools.oracle_map import oracle_groups
+from objslam_tools.oracle_map import oracle_association
 from objslam_tools.trajectory import PoseTrack
 
 
@@ -81,9 +82,7 @@ def main() -> None:
     detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
     images = detect_bag(bag, detector, lambda *_: None)
     problem = build_problem(odometry_samples(bag), images, config.graph.camera_mount.to_mount(), catalog, config.graph)
-    chained = tracklets_of_problem(problem, config.sampler.tracklets)
-    in_tracklets = [m for t in chained.tracklets for m in t.measurement_indices]
-    by_truth, _ = oracle_groups(problem, images, reference.ground_truth, reference.ground_truth_track, in_tracklets)
+    by_truth = oracle_association(problem, images, config, reference.ground_truth, reference.ground_truth_track).groups
     truth_ids = sorted(by_truth)
     groups = [by_truth[k] for k in truth_ids]
     solution = solve(problem, groups)
@@ -116,7 +115,7 @@ def main() -> None:
             f"{np.array2string(np.sqrt(np.linalg.eigvalsh(marginal)), precision=3):>15s}  "
             f"{np.array2string(np.sqrt(values), precision=3):>15s}  {cos:12.2f}  {np.linalg.norm(radial):10.1f}"
         )
-    ways = (("marginal, first pose anchored", marginal_nees), ("about the trajectory (as in the map)", aligned_nees))
+    ways = (("marginal, first pose anchored", marginal_nees), ("about the trajectory (the posterior)", aligned_nees))
     for name, values in ways:
         summary = nees_summary(values, 2)
         print(f"  mean NEES xy, {name}: {summary.mean:.2f}  95 % band [{summary.band[0]:.2f}, {summary.band[1]:.2f}]")

@@ -15,8 +15,7 @@ import pytest
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import between, rotation, transform_points, wrap_angle
+from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
 from objslam_mapper.gtsam_backend import build_gtsam_graph
 from objslam_mapper.initialization import initial_object
@@ -25,20 +24,8 @@ from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.slice_model import predict_slices, slice_error
 from objslam_mapper.solver import solve
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
-from objslam_tools.trajectory import fit_se2
 
-CATALOG = load_catalog()
-CONFIG = GraphConfig()
-MOUNT = CONFIG.camera_mount.to_mount()
-STEP_NS = 250_000_000
-SCENE = (
-    SyntheticObject("red", (2.2, 0.3, 0.0), (0.31, 0.58)),
-    SyntheticObject("green", (-0.5, 1.0, 0.0), (0.41, 0.39)),
-    SyntheticObject("cyan", (0.4, -0.9, 0.75), (0.15, 0.26)),
-    SyntheticObject("blue", (-2.0, -0.5, 0.0), (0.2, 0.92)),
-    SyntheticObject("yellow", (0.5, 2.4, 0.0), (0.5, 0.3)),
-)
-
+from .graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
 
 # Both ways of solving the linear systems: dense Schur complement (few objects), sparse LU.
 SOLVERS = pytest.mark.parametrize("dense_object_limit", [40, 0], ids=["schur", "sparse"])
@@ -54,17 +41,6 @@ def make_run(seed, scene=SCENE, n_poses=60, config=CONFIG, solve_config=None, **
     run = simulate_run(poses, stamps, scene, CATALOG, np.random.default_rng(seed), config=config, **kwargs)
     problem = build_problem(run.odometry, run.images, MOUNT, CATALOG, solve_config or config)
     return run, problem
-
-
-def draw_scene(rng):
-    """SCENE with base heights and sizes drawn from the class priors (for consistency tests)."""
-    objects = []
-    for obj in SCENE:
-        cls = CATALOG[obj.label]
-        size = rng.normal(cls.size_mean, [cls.diameter_stddev_m, cls.height_stddev_m])
-        z_base = rng.normal(cls.z_base_m, cls.z_base_stddev_m)
-        objects.append(SyntheticObject(obj.label, (obj.location_m[0], obj.location_m[1], z_base), tuple(size)))
-    return tuple(objects)
 
 
 # -- an independent evaluation of the model, for checking the solver's bookkeeping -------------
@@ -254,13 +230,8 @@ def test_object_positions_are_consistent_nees():
         solution = solve(problem, run.groups(problem), with_covariances=True)
         assert solution.converged
         # Covariances are about the trajectory: errors are measured after fitting it, as objslam eval does.
-        gt_T_map = fit_se2(solution.map_T_base[:, :2], run.true_map_T_base[:, :2])
-        rotate = np.eye(3)
-        rotate[:2, :2] = rotation(gt_T_map[2])
-        for j, obj in zip(run.seen_objects(), solution.objects, strict=True):
-            location = np.r_[transform_points(gt_T_map, obj.location_m[None, :2])[0], obj.location_m[2]]
-            error = location - np.array(run.objects[j].location_m)
-            nees.append(error @ np.linalg.solve(rotate @ obj.location_cov @ rotate.T, error))
+        # The runs' noise is the configured, so the posterior is the error's covariance.
+        nees += object_nees(solution, run, lambda o: o.location_cov)
     count = len(nees)
     low, high = chi2.ppf([0.025, 0.975], 3 * count) / count
     assert low < np.mean(nees) < high, (np.mean(nees), low, high)

@@ -99,6 +99,9 @@ def test_same_map_evidence_and_marginals_as_the_fast_solver(reference, drive, pe
         np.testing.assert_array_equal(a.measurement_indices, b.measurement_indices)
         np.testing.assert_allclose(a.location_cov, b.location_cov, rtol=1e-4)
         np.testing.assert_allclose(a.size_cov, b.size_cov, rtol=1e-4)
+        # The error covariance is computed by shared code at each backend's MAP.
+        assert a.error_cov is not None
+        np.testing.assert_allclose(a.error_cov, b.error_cov, rtol=1e-3, atol=1e-12)
 
 
 @pytest.mark.parametrize("per_detection", [True, False], ids=["per-detection", "per-group"])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -71,6 +72,17 @@ def test_algorithm_1_bookkeeping():
     assert built.trajectory_array()[:, 0] == pytest.approx([0.3, 1.3, 2.3])
     assert [p.stamp_ns for p in built.trajectory] == STAMPS
     assert built.diagnostics["note"] == 1 and built.diagnostics["map_samples"] == 4
+
+
+def test_the_map_reports_error_covariances_and_the_existence_test_reads_the_marginals():
+    error = np.diag([1e-6, 4e-6, 1e-6, 1e-6, 1e-6])  # the estimate's error: millimetres
+    precise = dataclasses.replace(obj(A, 1.0), error_cov=error)
+    # A posterior of 0.5 m is spurious whatever its error covariance says.
+    vague = dataclasses.replace(obj(B, 5.0, stddev_m=0.5), error_cov=error)
+    built = build_from_samples([(SampleSummary(trajectory(), (precise, vague)), 1)], STAMPS, report_min_fraction=0.2)
+    assert len(built.objects) == 1 and len(built.rejected) == 1
+    np.testing.assert_allclose(built.objects[0].position_covariance, error[:3, :3])
+    np.testing.assert_allclose(built.objects[0].size_covariance, error[3:, 3:])
 
 
 def test_multiplicities_count_as_repeated_samples():

@@ -173,6 +173,44 @@ class KeyframeConfig:
 
 
 @dataclass(frozen=True)
+class ErrorCovarianceConfig:
+    """Which covariances a map reports (objslam_mapper.error_covariance).
+
+    On: the covariance of the estimate's error, with each noise group's level measured
+    from the residuals and a bias common to all slices of one object. Off: the posterior
+    under the configured noise, which is generous on purpose (the association needs it)
+    and so overstates the error several times. Either way the MAP, the evidence and the
+    existence test are the model's. A bias share is the bias's stddev in units of each
+    slice's configured stddev; the defaults are the detector's on the bundled bags
+    (``scripts/object_bias.py bags/small bags/office``: root mean square over the objects
+    of the mean of each object's whitened slice errors at the ground truth, rounded).
+    """
+
+    enabled: bool = setting(
+        True,
+        "report the covariance of the estimate's error (noise levels from the residuals, a bias per object) "
+        "instead of the posterior under the configured noise",
+    )
+    bearing_bias_share: float = setting(
+        0.04,
+        "stddev of a bearing error common to all slices of an object, in units of the slices' configured stddev",
+        minimum=0.0,
+    )
+    angular_width_bias_share: float = setting(0.11, "... of the angular width", minimum=0.0)
+    elevation_bottom_bias_share: float = setting(0.11, "... of the lower edge elevation", minimum=0.0)
+    elevation_top_bias_share: float = setting(0.065, "... of the upper edge elevation", minimum=0.0)
+
+    def bias_shares(self) -> tuple[float, float, float, float]:
+        """Per slice component, in the order of objslam_mapper.slice_model.COMPONENTS."""
+        return (
+            self.bearing_bias_share,
+            self.angular_width_bias_share,
+            self.elevation_bottom_bias_share,
+            self.elevation_top_bias_share,
+        )
+
+
+@dataclass(frozen=True)
 class SolverConfig:
     """Gauss-Newton / Levenberg-Marquardt loop of the known-association solve."""
 
@@ -198,6 +236,9 @@ class SolverConfig:
         "(objslam_mapper.gtsam_backend: the same model as a GTSAM factor graph; same answers, slower)",
     )
     keyframes: KeyframeConfig = setting(KeyframeConfig(), "which images get a graph pose of their own")
+    error_covariance: ErrorCovarianceConfig = setting(
+        ErrorCovarianceConfig(), "which covariances a map reports: the estimate's error, or the posterior"
+    )
 
     def __post_init__(self) -> None:
         if self.backend not in SOLVER_BACKENDS:

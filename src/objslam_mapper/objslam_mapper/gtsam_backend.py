@@ -74,7 +74,13 @@ from objslam_mapper.normal_equations import (
 from objslam_mapper.outliers import truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.slice_model import BEARING, predict_reduced
-from objslam_mapper.solver import GraphSolution, initial_calibration, initial_state, make_solution
+from objslam_mapper.solver import (
+    GraphSolution,
+    initial_calibration,
+    initial_state,
+    make_solution,
+    object_error_covariance,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -519,6 +525,7 @@ def solve_gtsam(
         if phase and not count_outliers(problem, layout, *keys.from_values(values)):
             break
         graph, keys = _build(problem, layout, per_detection, window_poses, cap_scale)
+        solved_cap_scale = cap_scale
         linearize = _Linearizer(graph, keys)
         if drive == "python":
             driven = _drive_python(linearize, values, cfg, limit)
@@ -548,6 +555,10 @@ def solve_gtsam(
     poses, objects = keys.from_values(driven.values)
     if covariance is not None and len(covariance) and problem.pose_count > 1:
         covariance = _about_trajectory(final.graph, keys, poses, objects, keyframes.images_per_keyframe, covariance)
+    calib = keys.calibration_of(driven.values)
+    error_cov = None
+    if with_covariances:
+        error_cov = object_error_covariance(keyframes, layout, (poses, objects, calib), solved_cap_scale)
     return make_solution(
         keyframes,
         layout,
@@ -559,8 +570,9 @@ def solve_gtsam(
         2.0 * final.cost,
         log_det,
         covariance,
-        keys.calibration_of(driven.values),
+        calib,
         calib_cov,
+        error_cov,
     )
 
 

@@ -507,6 +507,7 @@ class AssociationTarget:
                     size_m=np.asarray(est.size_m, dtype=float),
                     location_cov=nan3 if est.location_cov is None else np.asarray(est.location_cov, dtype=float),
                     size_cov=nan2 if est.size_cov is None else np.asarray(est.size_cov, dtype=float),
+                    error_cov=None if est.error_cov is None else np.asarray(est.error_cov, dtype=float),
                 )
             )
         return SampleSummary(

@@ -27,7 +27,9 @@ share is above 1/2, two objects of one sample (disjoint) never join one group. T
 - the map holds the identities with ``P(ID|Z) > existence_threshold`` (1/2), the rest seen
   often enough are reported as rejected;
 - an identity's location and size are averages over the samples yielding it (eqs. 19-20),
-  its covariance the mixture's (mean marginal covariance plus the spread of the means);
+  its covariance the mixture's (mean covariance plus the spread of the means; each
+  sample's covariance is that of its estimate's error when the solver reports it, else its
+  marginal);
   identities that no sample yields are averaged over the samples holding them;
 - the trajectory is the average over all samples (eq. 18), headings averaged on the circle;
 - the odometry calibration (when the graph estimates it) is averaged like an object (mean
@@ -63,8 +65,11 @@ class SampleObject:
     label: str
     location_m: NDArray[np.float64]  # (3,) x, y, z_base
     size_m: NDArray[np.float64]  # (2,) diameter, height
-    location_cov: NDArray[np.float64]  # (3, 3) m^2
+    location_cov: NDArray[np.float64]  # (3, 3) m^2, posterior marginal: the spurious test's
     size_cov: NDArray[np.float64]  # (2, 2) m^2
+    # (5, 5) m^2, location then size: the covariance of the estimate's error, reported
+    # instead of the marginals when known (objslam_mapper.error_covariance).
+    error_cov: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,8 +122,11 @@ class _Identity:
 
     def add(self, obj: SampleObject, count: float, yielded: bool) -> None:
         vec = np.concatenate([obj.location_m, obj.size_m])
-        cov = np.zeros((5, 5))
-        cov[:3, :3], cov[3:, 3:] = obj.location_cov, obj.size_cov
+        if obj.error_cov is not None:
+            cov = np.asarray(obj.error_cov, dtype=float)
+        else:
+            cov = np.zeros((5, 5))
+            cov[:3, :3], cov[3:, 3:] = obj.location_cov, obj.size_cov
         self._accumulate(yielded, [count * vec, count * np.outer(vec, vec), count * cov], count)
 
     def moments(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

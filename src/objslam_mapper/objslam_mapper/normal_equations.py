@@ -51,7 +51,8 @@ import scipy.sparse.linalg
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
-from objslam_mapper.gauge import about_trajectory, trajectory_gauge
+from objslam_mapper.error_covariance import ErrorCovariance, NoiseGroup, error_covariance
+from objslam_mapper.gauge import GAUGE_DIM, about_trajectory, object_motion, trajectory_gauge
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.outliers import (
     COLD_START_CAP_SCALES,
@@ -61,7 +62,7 @@ from objslam_mapper.outliers import (
     truncate,
 )
 from objslam_mapper.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
-from objslam_mapper.slice_model import BEARING, predict_reduced
+from objslam_mapper.slice_model import BEARING, COMPONENTS, ReducedPrediction, predict_reduced
 
 _BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
 
@@ -447,16 +448,21 @@ class AssociationSystem:
         pose_calib[1:] += block
         return 0.5 * float(prior @ prior), grad, pose_calib, calib_diag
 
-    def linearize(self, poses: NDArray, objects: NDArray, calib: NDArray) -> Linearization:
-        n, k = self.n_poses, self.n_objects
-        lay = self.layout
-        obj = objects[lay.object_of]
-        pred = predict_reduced(poses[lay.pose_of], obj[:, :3], obj[:, 3:], self.mounts)
-        if not np.all(pred.valid):
-            return Linearization(cost=np.inf, valid=False)
+    def _whitened_slices(self, poses: NDArray, objects: NDArray) -> tuple[ReducedPrediction, NDArray]:
+        """The slices' predictions and their whitened residuals (4, A), before any cap."""
+        obj = objects[self.layout.object_of]
+        pred = predict_reduced(poses[self.layout.pose_of], obj[:, :3], obj[:, 3:], self.mounts)
         sl = pred.values - self.z
         sl[BEARING] = wrap_angle(sl[BEARING])
         sl *= self.inv_sigma
+        return pred, sl
+
+    def linearize(self, poses: NDArray, objects: NDArray, calib: NDArray) -> Linearization:
+        n, k = self.n_poses, self.n_objects
+        lay = self.layout
+        pred, sl = self._whitened_slices(poses, objects)
+        if not np.all(pred.valid):
+            return Linearization(cost=np.inf, valid=False)
         half = half_chi2(sl)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
         if self.has_outlier_model and self.cap_scale < np.inf:
@@ -505,6 +511,81 @@ class AssociationSystem:
             pose_calib,
             calib_diag,
         )
+
+    def information_matrix(self, lin: Linearization) -> NDArray[np.float64]:
+        """The dense ``Lambda`` of a linearization (rows as in the sparse system)."""
+        pattern = self.layout.sparse
+        data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices))
+        matrix = scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
+        return matrix.toarray()
+
+    def noise_groups(
+        self, poses: NDArray, objects: NDArray, calib: NDArray, object_bias_share: Sequence[float]
+    ) -> list[NoiseGroup]:
+        """Whitened rows of the slices (one group per component) and of the odometry (translation, turn).
+
+        Slices beyond their cap (``cap_scale``) are left out, as the information leaves
+        them out. Slice rows know their object, whose slices share a bias of ``object_bias_share``
+        (one per component) times their configured stddev (:mod:`objslam_mapper.error_covariance`).
+        """
+        n, dim = self.n_poses, self.dimension
+        lay = self.layout
+        pred, sl = self._whitened_slices(poses, objects)
+        inlier = np.ones(sl.shape[1], dtype=bool)
+        if self.has_outlier_model and self.cap_scale < np.inf:
+            inlier = half_chi2(sl) <= self.outlier_cost * self.cap_scale
+        kept = np.flatnonzero(inlier)
+        jac = pred.jacobian[:, :, kept] * self.inv_sigma[:, None, kept]
+        columns = np.concatenate(
+            [
+                POSE_DIM * lay.pose_of[kept, None] + np.arange(POSE_DIM),
+                POSE_DIM * n + OBJECT_DIM * lay.object_of[kept, None] + np.arange(OBJECT_DIM),
+            ],
+            axis=1,
+        )
+        indptr = np.arange(0, (POSE_DIM + OBJECT_DIM) * len(kept) + 1, POSE_DIM + OBJECT_DIM)
+        groups = []
+        for c, name in enumerate(COMPONENTS):
+            values = np.concatenate([(jac[c, :3] * _POSE_SIGN[:, None]).T, jac[c, _OBJECT_COLUMNS].T], axis=1)
+            jacobian = scipy.sparse.csr_matrix((values.ravel(), columns.ravel(), indptr), shape=(len(kept), dim))
+            groups.append(NoiseGroup(name, jacobian, sl[c, kept], lay.object_of[kept], float(object_bias_share[c])))
+        return groups + self._odometry_groups(poses, calib)
+
+    def _odometry_groups(self, poses: NDArray, calib: NDArray) -> list[NoiseGroup]:
+        """The odometry factors' whitened rows: translation (x, y) and turn (:meth:`_odometry`'s error)."""
+        n, dim = self.n_poses, self.dimension
+        if n < 2:
+            return []
+        w, wt, k, m, dx, dy, q1, q2, dtheta, e1, e2, e3 = self._odometry(poses, calib)[5]
+        c, s = np.cos(poses[:-1, 2]), np.sin(poses[:-1, 2])
+        a, b = -s * dx + c * dy, -c * dx - s * dy
+        wk, wtm = w * k, wt * m
+        i = POSE_DIM * np.arange(n - 1)
+        # Per row: columns of pose i (x, y, theta), pose j, then the calibration's.
+        xy_cols = [i, i + 1, i + 2, i + 3, i + 4]
+        e1_vals = [-wk * c, -wk * s, wk * a, wk * c, wk * s]
+        e2_vals = [wk * s, -wk * c, wk * b, -wk * s, wk * c]
+        theta_cols = [i + 2, i + 5]
+        theta_vals = [-wtm, wtm]
+        if self.n_calib:
+            first_calib = np.full(n - 1, dim - self.n_calib)
+            xy_cols.append(first_calib)
+            e1_vals.append(w * q1)
+            e2_vals.append(w * q2)
+            theta_cols += [first_calib + 1, first_calib + 2]
+            theta_vals += [wt * dtheta, wt * self.problem.increment_path_length_m]
+
+        def rows(cols: list[NDArray], vals: list[NDArray]) -> scipy.sparse.csr_matrix:
+            width = len(cols)
+            indptr = np.arange(0, width * (n - 1) + 1, width)
+            values, columns = np.stack(vals, axis=1).ravel(), np.stack(cols, axis=1).ravel()
+            return scipy.sparse.csr_matrix((values, columns, indptr), shape=(n - 1, dim))
+
+        translation = scipy.sparse.vstack([rows(xy_cols, e1_vals), rows(xy_cols, e2_vals)]).tocsr()
+        return [
+            NoiseGroup("odometry_translation", translation, np.concatenate([e1, e2])),
+            NoiseGroup("odometry_turn", rows(theta_cols, theta_vals), e3),
+        ]
 
     def factorize(self, lin: Linearization, damping: float) -> Factorization:
         """Solve the normal equations, Marquardt-damped (``diag *= 1 + damping``) if asked.
@@ -665,6 +746,35 @@ class AssociationSystem:
         object_gauge_cov = solved[split : split + OBJECT_DIM * self.n_objects]
         gauge_cov = gauge.rows @ solved[:split]
         return about_trajectory(marginals, object_gauge_cov, gauge_cov, np.asarray(objects)[:, :2], gauge.centroid_xy)
+
+    def object_error_covariance_about_trajectory(
+        self,
+        lin: Linearization,
+        state: tuple[NDArray, NDArray, NDArray],
+        pose_weights: NDArray[np.float64],
+        object_bias_share: Sequence[float],
+    ) -> ErrorCovariance:
+        """(K, 5, 5) covariances of the objects' errors about the trajectory (:mod:`objslam_mapper.error_covariance`).
+
+        ``lin`` is the linearization at ``state`` (poses, objects, calibration), with the
+        caps the MAP was solved with. Also in the result: the same rows' posterior, per object.
+        """
+        poses, objects, calib = state
+        k, split = self.n_objects, POSE_DIM * self.n_poses
+        rows = np.zeros((OBJECT_DIM * k, self.dimension))
+        rows[:, split : split + OBJECT_DIM * k] = np.eye(OBJECT_DIM * k)
+        if self.n_poses >= 2:
+            gauge = trajectory_gauge(poses[:, :2], pose_weights)
+            motion = object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM).reshape(-1, GAUGE_DIM)
+            rows[:, :split] -= motion @ gauge.rows
+        groups = self.noise_groups(poses, objects, calib, object_bias_share)
+        result = error_covariance(self.information_matrix(lin), groups, rows)
+        diagonal = np.arange(k)
+
+        def blocks(cov: NDArray) -> NDArray:
+            return cov.reshape(k, OBJECT_DIM, k, OBJECT_DIM)[diagonal, :, diagonal, :]
+
+        return result._replace(covariance=blocks(result.covariance), posterior=blocks(result.posterior))
 
     def calibration_covariance(self, fac: Factorization) -> NDArray[np.float64]:
         """(C, C) marginal covariance of the odometry calibration (undamped factorization)."""

@@ -77,7 +77,11 @@ logger = logging.getLogger(__name__)
 class ObjectEstimate:
     """One object of a solution: MAP location (x, y, z_base) and size (diameter, height), m.
 
-    Covariances (m^2) are the marginals of the Laplace posterior, None unless asked for.
+    Covariances (m^2), None unless asked for: ``location_cov`` and ``size_cov`` are the
+    marginals of the Laplace posterior about the trajectory (the existence test reads
+    them); ``error_cov`` (5, 5; location, then size) is the covariance of the estimate's
+    error about the trajectory (:mod:`objslam_mapper.error_covariance`), what a map
+    reports, None when ``solver.error_covariance.enabled`` is off.
     """
 
     label: str
@@ -86,6 +90,7 @@ class ObjectEstimate:
     measurement_indices: NDArray[np.int64]
     location_cov: NDArray[np.float64] | None = None
     size_cov: NDArray[np.float64] | None = None
+    error_cov: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -223,6 +228,7 @@ def solve(
             final, poses[:, :2], keyframes.images_per_keyframe, objects
         )
     calib_cov = graph.calibration_covariance(final) if with_covariances else None
+    error_cov = object_error_covariance(keyframes, layout, state, graph.cap_scale) if with_covariances else None
     return make_solution(
         keyframes,
         layout,
@@ -236,10 +242,32 @@ def solve(
         covariance,
         calib,
         calib_cov,
+        error_cov,
     )
 
 
 _State = tuple[NDArray, NDArray, NDArray]  # poses (N, 3), objects (K, 5), calibration (C,)
+
+
+def object_error_covariance(
+    keyframes: KeyframeGraph, layout: Layout, state: tuple[NDArray, NDArray, NDArray], cap_scale: float
+) -> NDArray[np.float64] | None:
+    """(K, 5, 5) error covariances about the trajectory at a MAP ``state`` (poses, objects, calibration).
+
+    Any backend's: the model is the same, only the solver differs. ``cap_scale`` is that of
+    the outlier caps the MAP was solved with. None when ``solver.error_covariance`` is
+    off or there are no objects.
+    """
+    problem = keyframes.problem
+    config = problem.solver.error_covariance
+    if not (config.enabled and layout.n_objects):
+        return None
+    system = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
+    system.cap_scale = cap_scale
+    lin = system.linearize(*state)
+    return system.object_error_covariance_about_trajectory(
+        lin, state, keyframes.images_per_keyframe, config.bias_shares()
+    ).covariance
 
 
 def _minimize(
@@ -306,6 +334,7 @@ def make_solution(
     covariance: NDArray | None,
     calibration: NDArray | None = None,
     calibration_cov: NDArray | None = None,
+    error_covariance: NDArray | None = None,
 ) -> GraphSolution:
     """The solution of a solve of ``keyframes.problem`` that ended at graph poses ``poses``."""
     problem = keyframes.problem
@@ -317,6 +346,7 @@ def make_solution(
             measurement_indices=group,
             location_cov=None if covariance is None else covariance[j, :3, :3],
             size_cov=None if covariance is None else covariance[j, 3:, 3:],
+            error_cov=None if error_covariance is None else error_covariance[j],
         )
         for j, group in enumerate(layout.groups)
     )

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -85,6 +86,32 @@ def oracle_groups(
     return groups, inconsistent
 
 
+class OracleAssociation(NamedTuple):
+    """A problem's ground-truth association: real object id -> its measurements, and what was left out."""
+
+    groups: dict[int, list[int]]
+    tracklet_count: int
+    isolated_dropped: int
+    in_tracklets: int  # measurements chained into tracklets
+    inconsistent: int  # of those, given an object but beyond the model's gate at the truth
+
+
+def oracle_association(
+    problem: GraphProblem,
+    images: Sequence[ImageSlices],
+    config: MapperConfig,
+    ground_truth: GroundTruth,
+    ground_truth_track: PoseTrack,
+) -> OracleAssociation:
+    """The measurements the sampler would see (chained into tracklets), grouped by their real object."""
+    chained = tracklets_of_problem(problem, config.sampler.tracklets)
+    in_tracklets = [m for t in chained.tracklets for m in t.measurement_indices]
+    groups, inconsistent = oracle_groups(problem, images, ground_truth, ground_truth_track, in_tracklets)
+    return OracleAssociation(
+        groups, len(chained.tracklets), len(chained.dropped_measurements), len(in_tracklets), inconsistent
+    )
+
+
 def build_oracle_map(
     odometry: Sequence[OdometrySample],
     images: Sequence[ImageSlices],
@@ -97,18 +124,17 @@ def build_oracle_map(
     started = time.perf_counter()
     graph = config.graph
     problem = build_problem(odometry, images, graph.camera_mount.to_mount(), catalog, graph)
-    chained = tracklets_of_problem(problem, config.sampler.tracklets)
-    in_tracklets = [m for t in chained.tracklets for m in t.measurement_indices]
-    groups, inconsistent = oracle_groups(problem, images, ground_truth, ground_truth_track, in_tracklets)
+    oracle = oracle_association(problem, images, config, ground_truth, ground_truth_track)
+    groups = oracle.groups
     diagnostics = {
         "association": "oracle",
         "poses": problem.pose_count,
         "measurements": problem.measurement_count,
-        "tracklets": len(chained.tracklets),
-        "isolated_dropped": len(chained.dropped_measurements),
+        "tracklets": oracle.tracklet_count,
+        "isolated_dropped": oracle.isolated_dropped,
         "association_objects": len(groups),
-        "clutter_measurements": len(in_tracklets) - sum(len(g) for g in groups.values()),
-        "inconsistent_measurements": inconsistent,
+        "clutter_measurements": oracle.in_tracklets - sum(len(g) for g in groups.values()),
+        "inconsistent_measurements": oracle.inconsistent,
     }
     built = map_of_groups(problem, [groups[k] for k in sorted(groups)], config.sampler, diagnostics)
     built.diagnostics["timings_s"] = {"total": round(time.perf_counter() - started, 3)}
