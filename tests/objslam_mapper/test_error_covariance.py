@@ -241,6 +241,18 @@ def test_the_switch_turns_error_covariances_off():
     assert all(o.error_cov is None for o in solve(problem, run.groups(problem)).objects)
 
 
+def test_a_singular_information_falls_back_to_the_marginals(monkeypatch, caplog):
+    run, problem = run_and_problem(4, n_poses=20)
+
+    def singular(*_args, **_kwargs):
+        raise ErrorCovarianceError("information matrix is not positive definite: leading minor 7")
+
+    monkeypatch.setattr(AssociationSystem, "object_error_covariance_about_trajectory", singular)
+    solution = solve(problem, run.groups(problem), with_covariances=True)
+    assert all(o.error_cov is None and o.location_cov is not None for o in solution.objects)
+    assert "marginals stand in" in caplog.text
+
+
 # -- the pipeline -------------------------------------------------------------------------------
 
 

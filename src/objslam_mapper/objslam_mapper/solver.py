@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from objslam_mapper.error_covariance import ErrorCovarianceError
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.initialization import initial_object
@@ -256,7 +257,8 @@ def object_error_covariance(
 
     Any backend's: the model is the same, only the solver differs. ``cap_scale`` is that of
     the outlier caps the MAP was solved with. None when ``solver.error_covariance`` is
-    off or there are no objects.
+    off, there are no objects, or the information at ``state`` cannot be inverted (the
+    map then reports the marginals).
     """
     problem = keyframes.problem
     config = problem.solver.error_covariance
@@ -265,9 +267,14 @@ def object_error_covariance(
     system = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
     system.cap_scale = cap_scale
     lin = system.linearize(*state)
-    return system.object_error_covariance_about_trajectory(
-        lin, state, keyframes.images_per_keyframe, config.bias_shares()
-    ).covariance
+    try:
+        result = system.object_error_covariance_about_trajectory(
+            lin, state, keyframes.images_per_keyframe, config.bias_shares()
+        )
+    except ErrorCovarianceError as exc:
+        logger.warning("no error covariances for this solution, the marginals stand in: %s", exc)
+        return None
+    return result.covariance
 
 
 def _minimize(
