@@ -16,6 +16,7 @@ from scipy.stats import chi2
 from objslam_mapper.error_covariance import (
     ErrorCovarianceError,
     NoiseGroup,
+    bias_shares,
     error_covariance,
     row_leverages,
     white_weights,
@@ -154,6 +155,20 @@ def test_sandwich_matches_monte_carlo_with_white_noise_and_object_biases():
     unbiased = error_covariance(information, groups_of(jacobians, residuals), rows)
     assert not np.allclose(unbiased.covariance, scatter, **tolerance)
     assert not np.allclose(result.posterior, scatter, **tolerance)
+
+
+def test_an_object_whose_residuals_show_a_large_bias_gets_it():
+    # Eight objects of 100 rows, white noise 0.3; biases of 0.1 except object 5's, 2.0.
+    rng = np.random.default_rng(21)
+    (jac,), (owner,) = linear_problem(rng, [800], 3, 8)
+    inverse = np.linalg.inv(jac.T @ jac + 1e-6 * np.eye(jac.shape[1]))
+    noise = 0.3 * rng.standard_normal(800) + np.where(np.arange(8) == 5, 2.0, 0.1)[owner]
+    residual = noise - jac @ (inverse @ (jac.T @ noise))
+    group = NoiseGroup("g", scipy.sparse.csr_matrix(jac), residual, owner, 0.1)
+    shares = bias_shares(group, inverse, white_weights(group, inverse))
+    assert shares[5] == pytest.approx(2.0, rel=0.3)  # the part the state took up is put back
+    assert np.all(shares >= 0.1)
+    assert np.median(np.delete(shares, 5)) < 0.2  # the others keep about the configured share
 
 
 def test_an_indefinite_information_is_one_clear_error():

@@ -22,11 +22,12 @@ variances taken as stated). A sandwich, as in M-estimation (Huber 1967, White 19
   keeps cutting it), and hundreds of slices do not average that away. Each slice
   component carries an error common to all slices of its object with standard deviation
   ``share_k`` times the slice's configured stddev (``solver.error_covariance.*_bias_share``),
-  so cut blobs (4x) and the hidden lower edge of raised objects get their larger biases.
+  so cut blobs (4x) and the hidden lower edge of raised objects get their larger biases;
+  an object whose own residual mean shows a larger bias gets that (:func:`bias_shares`).
 
 With whitened Jacobians ``J_k`` per noise group (bearing, width, lower edge, upper edge,
 odometry translation, odometry turn), the weights ``W_k = diag(r_i² / (1 - h_ii))`` and
-per-object indicator rows ``S_k`` (``share_k`` on the object's slices),
+per-object indicator rows ``S_k`` (the object's share on its slices),
 ``B = Λ_rest + Σ_k (J_kᵀ W_k J_k + (S_k J_k)ᵀ(S_k J_k))``. For reported rows ``R`` (the
 objects about the trajectory, :mod:`objslam_mapper.gauge`), with ``X = Λ⁻¹ Rᵀ`` that is
 ``Xᵀ B X``. The MAP, the evidence and the existence test are unchanged: they are the model's.
@@ -48,6 +49,9 @@ logger = logging.getLogger(__name__)
 # A row that determines its own fit almost alone (leverage near 1) says little about its noise;
 # its HC2 weight is capped at this many times its squared residual.
 MAX_INFLATION = 100.0
+# An object's residual mean shows at least this share of its bias (the state took up the rest):
+# below it, the estimate of the bias from the mean would be mostly noise.
+MIN_VISIBLE = 0.05
 
 
 class ErrorCovarianceError(ValueError):
@@ -109,6 +113,27 @@ def _owner_rows(group: NoiseGroup, scale: float) -> scipy.sparse.csr_matrix:
     )
 
 
+def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(G,) each object's bias share: the configured one, or more where its own residuals show more.
+
+    A bias ``b`` on object ``j``'s rows leaves ``v_j b`` in the mean of its residuals, where
+    ``v_j = 1 - g_jᵀ Λ⁻¹ g_j / n_j`` (``g_j = J_jᵀ 1``) is the part the state does not take
+    up; the white noise adds its mean weight over ``n_j``. So ``(r̄_j² - w̄_j / n_j) / v_j²``
+    estimates ``b²`` from the one object (``v_j`` at least ``MIN_VISIBLE``), and the share
+    is the larger of that and the configured ``bias_share``: an object that is cut or merged
+    for much of its track (a bias many times the typical) says so, the others keep the
+    detector's typical bias.
+    """
+    owners = int(group.owner.max()) + 1
+    count = np.maximum(np.bincount(group.owner, minlength=owners).astype(float), 1.0)
+    mean = np.bincount(group.owner, weights=group.residual, minlength=owners) / count
+    white = np.bincount(group.owner, weights=weights, minlength=owners) / count
+    totals = (_owner_rows(group, 1.0) @ group.jacobian).toarray()  # g_j
+    visible = np.clip(1.0 - np.einsum("ga,ab,gb->g", totals, inverse, totals) / count, MIN_VISIBLE, 1.0)
+    own = (mean**2 - white / count) / visible**2
+    return np.sqrt(np.maximum(group.bias_share**2, own))
+
+
 def error_covariance(
     information: NDArray[np.float64],
     groups: Sequence[NoiseGroup],
@@ -141,7 +166,10 @@ def error_covariance(
         projected = group.jacobian @ solved  # J_k X
         covariance += (weights[:, None] * projected).T @ projected
         if group.owner is not None and group.bias_share > 0.0:
-            common = _owner_rows(group, group.bias_share) @ projected  # S_k J_k X
+            share = bias_shares(group, inverse, weights)
+            m = len(group.residual)
+            shared = scipy.sparse.csr_matrix((share[group.owner], (group.owner, np.arange(m))), shape=(len(share), m))
+            common = shared @ projected  # S_k J_k X
             covariance += common.T @ common
     covariance += solved.T @ rest @ solved
     logger.debug("white noise over the configured: %s", ", ".join(f"{k} {v:.3g}" for k, v in levels.items()))
