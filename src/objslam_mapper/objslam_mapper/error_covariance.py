@@ -129,7 +129,7 @@ def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArra
     mean = np.bincount(group.owner, weights=group.residual, minlength=owners) / count
     white = np.bincount(group.owner, weights=weights, minlength=owners) / count
     totals = (_owner_rows(group, 1.0) @ group.jacobian).toarray()  # g_j
-    visible = np.clip(1.0 - np.einsum("ga,ab,gb->g", totals, inverse, totals) / count, MIN_VISIBLE, 1.0)
+    visible = np.clip(1.0 - np.sum((totals @ inverse) * totals, axis=1) / count, MIN_VISIBLE, 1.0)
     own = (mean**2 - white / count) / visible**2
     return np.sqrt(np.maximum(group.bias_share**2, own))
 
