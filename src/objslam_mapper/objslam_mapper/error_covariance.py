@@ -105,12 +105,10 @@ def white_weights(group: NoiseGroup, inverse: NDArray[np.float64]) -> NDArray[np
     return r * r / np.maximum(redundancy, 1.0 / MAX_INFLATION)
 
 
-def _owner_rows(group: NoiseGroup, scale: float) -> scipy.sparse.csr_matrix:
-    """(G, m): row j is ``scale`` on the rows of object j."""
+def _owner_rows(group: NoiseGroup, values: NDArray[np.float64]) -> scipy.sparse.csr_matrix:
+    """(G, m): row j holds ``values`` (m,) on the rows of object j and zeros elsewhere."""
     m = len(group.residual)
-    return scipy.sparse.csr_matrix(
-        (np.full(m, scale), (group.owner, np.arange(m))), shape=(int(group.owner.max()) + 1, m)
-    )
+    return scipy.sparse.csr_matrix((values, (group.owner, np.arange(m))), shape=(int(group.owner.max()) + 1, m))
 
 
 def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -128,7 +126,7 @@ def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArra
     count = np.maximum(np.bincount(group.owner, minlength=owners).astype(float), 1.0)
     mean = np.bincount(group.owner, weights=group.residual, minlength=owners) / count
     white = np.bincount(group.owner, weights=weights, minlength=owners) / count
-    totals = (_owner_rows(group, 1.0) @ group.jacobian).toarray()  # g_j
+    totals = (_owner_rows(group, np.ones(len(group.residual))) @ group.jacobian).toarray()  # g_j
     visible = np.clip(1.0 - np.sum((totals @ inverse) * totals, axis=1) / count, MIN_VISIBLE, 1.0)
     own = (mean**2 - white / count) / visible**2
     return np.sqrt(np.maximum(group.bias_share**2, own))
@@ -167,9 +165,7 @@ def error_covariance(
         covariance += (weights[:, None] * projected).T @ projected
         if group.owner is not None and group.bias_share > 0.0:
             share = bias_shares(group, inverse, weights)
-            m = len(group.residual)
-            shared = scipy.sparse.csr_matrix((share[group.owner], (group.owner, np.arange(m))), shape=(len(share), m))
-            common = shared @ projected  # S_k J_k X
+            common = _owner_rows(group, share[group.owner]) @ projected  # S_k J_k X
             covariance += common.T @ common
     covariance += solved.T @ rest @ solved
     logger.debug("white noise over the configured: %s", ", ".join(f"{k} {v:.3g}" for k, v in levels.items()))

@@ -65,6 +65,7 @@ from objslam_mapper.gauge import GAUGE_DIM, about_trajectory, trajectory_gauge
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.graph_config import SolverConfig
 from objslam_mapper.normal_equations import (
+    AssociationSystem,
     Layout,
     cap_schedule,
     count_outliers,
@@ -558,7 +559,9 @@ def solve_gtsam(
     calib = keys.calibration_of(driven.values)
     error_cov = None
     if with_covariances:
-        error_cov = object_error_covariance(keyframes, layout, (poses, objects, calib), solved_cap_scale)
+        system = AssociationSystem(problem, layout, cfg.dense_object_limit)
+        system.cap_scale = solved_cap_scale
+        error_cov = object_error_covariance(keyframes, system, (poses, objects, calib))
     return make_solution(
         keyframes,
         layout,

@@ -512,12 +512,20 @@ class AssociationSystem:
             calib_diag,
         )
 
-    def information_matrix(self, lin: Linearization) -> NDArray[np.float64]:
-        """The dense ``Lambda`` of a linearization (rows as in the sparse system)."""
+    def _sparse_information(self, lin: Linearization, damping: float = 0.0) -> scipy.sparse.csc_matrix:
+        """``Lambda`` of a linearization as a sparse matrix, Marquardt-damped if asked.
+
+        Rows: poses, objects, calibration.
+        """
         pattern = self.layout.sparse
         data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices))
-        matrix = scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
-        return matrix.toarray()
+        if damping > 0.0:
+            data[pattern.diagonal_slots] *= 1.0 + damping
+        return scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
+
+    def information_matrix(self, lin: Linearization) -> NDArray[np.float64]:
+        """The dense ``Lambda`` of a linearization (rows as in the sparse system)."""
+        return self._sparse_information(lin).toarray()
 
     def noise_groups(
         self, poses: NDArray, objects: NDArray, calib: NDArray, object_bias_share: Sequence[float]
@@ -664,11 +672,7 @@ class AssociationSystem:
         )
 
     def _factorize_sparse(self, lin: Linearization, damping: float) -> Factorization:
-        pattern = self.layout.sparse
-        data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices))
-        if damping > 0.0:
-            data[pattern.diagonal_slots] *= 1.0 + damping
-        matrix = scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
+        matrix = self._sparse_information(lin, damping)
         try:
             lu = scipy.sparse.linalg.splu(
                 matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}

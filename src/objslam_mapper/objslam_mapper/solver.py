@@ -229,7 +229,7 @@ def solve(
             final, poses[:, :2], keyframes.images_per_keyframe, objects
         )
     calib_cov = graph.calibration_covariance(final) if with_covariances else None
-    error_cov = object_error_covariance(keyframes, layout, state, graph.cap_scale) if with_covariances else None
+    error_cov = object_error_covariance(keyframes, graph, state, lin) if with_covariances else None
     return make_solution(
         keyframes,
         layout,
@@ -251,22 +251,22 @@ _State = tuple[NDArray, NDArray, NDArray]  # poses (N, 3), objects (K, 5), calib
 
 
 def object_error_covariance(
-    keyframes: KeyframeGraph, layout: Layout, state: tuple[NDArray, NDArray, NDArray], cap_scale: float
+    keyframes: KeyframeGraph,
+    system: AssociationSystem,
+    state: tuple[NDArray, NDArray, NDArray],
+    lin: Linearization | None = None,
 ) -> NDArray[np.float64] | None:
     """(K, 5, 5) error covariances about the trajectory at a MAP ``state`` (poses, objects, calibration).
 
-    Any backend's: the model is the same, only the solver differs. ``cap_scale`` is that of
-    the outlier caps the MAP was solved with. None when ``solver.error_covariance`` is
-    off, there are no objects, or the information at ``state`` cannot be inverted (the
-    map then reports the marginals).
+    Any backend's: the model is the same, only the solver differs. ``system`` carries the
+    outlier caps the MAP was solved with; ``lin`` is its linearization at ``state`` when the
+    caller has it. None when ``solver.error_covariance`` is off, there are no objects, or
+    the information at ``state`` cannot be inverted (the map then reports the marginals).
     """
-    problem = keyframes.problem
-    config = problem.solver.error_covariance
-    if not (config.enabled and layout.n_objects):
+    config = keyframes.problem.solver.error_covariance
+    if not (config.enabled and system.n_objects):
         return None
-    system = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
-    system.cap_scale = cap_scale
-    lin = system.linearize(*state)
+    lin = system.linearize(*state) if lin is None else lin
     try:
         result = system.object_error_covariance_about_trajectory(
             lin, state, keyframes.images_per_keyframe, config.bias_shares()
