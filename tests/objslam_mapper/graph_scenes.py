@@ -26,13 +26,18 @@ SCENE = (
 )
 
 
-def draw_scene(rng: np.random.Generator) -> tuple[SyntheticObject, ...]:
-    """SCENE with base heights and sizes drawn from the class priors (for consistency tests)."""
+def draw_scene(rng: np.random.Generator, floor_z_base_spread_m: float | None = None) -> tuple[SyntheticObject, ...]:
+    """SCENE with base heights and sizes drawn from the class priors (for consistency tests).
+
+    ``floor_z_base_spread_m``: floor objects' base heights drawn with this stddev instead
+    of their prior's (0: on the floor, as in the bags).
+    """
     objects = []
     for obj in SCENE:
         cls = CATALOG[obj.label]
         size = rng.normal(cls.size_mean, [cls.diameter_stddev_m, cls.height_stddev_m])
-        z_base = rng.normal(cls.z_base_m, cls.z_base_stddev_m)
+        spread = cls.z_base_stddev_m if floor_z_base_spread_m is None or not cls.on_floor else floor_z_base_spread_m
+        z_base = rng.normal(cls.z_base_m, spread)
         objects.append(SyntheticObject(obj.label, (obj.location_m[0], obj.location_m[1], z_base), tuple(size)))
     return tuple(objects)
 

@@ -39,7 +39,8 @@ def run_and_problem(seed, n_poses=40, config=CONFIG, **noise):
     rng = np.random.default_rng(seed)
     poses = ellipse_trajectory(n_poses, (3.0, 1.8))
     stamps = [k * STEP_NS for k in range(n_poses)]
-    run = simulate_run(poses, stamps, draw_scene(rng), CATALOG, rng, config=config, **noise)
+    scene = draw_scene(rng, config.solver.error_covariance.floor_z_base_spread_m)
+    run = simulate_run(poses, stamps, scene, CATALOG, rng, config=config, **noise)
     return run, build_problem(run.odometry, run.images, MOUNT, CATALOG, config)
 
 
@@ -157,6 +158,41 @@ def test_sandwich_matches_monte_carlo_with_white_noise_and_object_biases():
     assert not np.allclose(result.posterior, scatter, **tolerance)
 
 
+def test_a_prior_counts_the_spread_of_the_truth_about_its_mean():
+    """Three variables with strong priors: one whose truth is the prior's mean (a floor
+    object's base height), one drawn with half the prior's stddev, one with all of it.
+    The sandwich with ``prior_scale`` (0, 0.5, 1) against the Monte Carlo scatter."""
+    rng = np.random.default_rng(5)
+    m = 1200
+    (jac,), _ = linear_problem(rng, [m], 3, 3)
+    n_state = jac.shape[1]
+    prior_sd = np.full(n_state, 10.0)  # weak elsewhere
+    strong = [3, 5, 7]
+    prior_sd[strong] = 0.05  # about as informative as the measurements of those variables
+    scale = np.ones(n_state)
+    scale[strong] = (0.0, 0.5, 1.0)
+    information = jac.T @ jac + np.diag(prior_sd**-2.0)
+    inverse = np.linalg.inv(information)
+    rows = np.vstack([np.eye(n_state)[strong], rng.standard_normal(n_state)])
+    errors, residual = [], None
+    for _ in range(4000):
+        truth = scale * prior_sd * rng.standard_normal(n_state)  # about the prior's mean, 0
+        noise = 0.5 * rng.standard_normal(m)  # half the configured noise
+        # MAP of z = J x + noise under the prior N(0, prior_sd^2): error x_hat - x.
+        estimate = inverse @ (jac.T @ (jac @ truth + noise))
+        errors.append(rows @ (estimate - truth))
+        residual = jac @ truth + noise - jac @ estimate
+    scatter = np.cov(np.array(errors).T)
+    tolerance = {"rtol": 0.15, "atol": 0.03 * np.abs(scatter).max()}
+    counted = error_covariance(information, groups_of([jac], [residual]), rows, scale)
+    np.testing.assert_allclose(counted.covariance, scatter, **tolerance)
+    as_stated = error_covariance(information, groups_of([jac], [residual]), rows)
+    ones = error_covariance(information, groups_of([jac], [residual]), rows, np.ones(n_state))
+    np.testing.assert_allclose(as_stated.covariance, ones.covariance)
+    assert not np.allclose(as_stated.covariance, scatter, **tolerance)
+    assert as_stated.covariance[0, 0] > 2.0 * scatter[0, 0]  # the prior counted as stated overstates it
+
+
 def test_an_object_whose_residuals_show_a_large_bias_gets_it():
     # Eight objects of 100 rows, white noise 0.3; biases of 0.1 except object 5's, 2.0.
     rng = np.random.default_rng(21)
@@ -247,6 +283,24 @@ def test_the_posterior_rows_are_the_solvers_covariances_about_the_trajectory(sol
         np.testing.assert_allclose(result.posterior[j, :3, :3], obj.location_cov, rtol=1e-6, atol=1e-12)
         np.testing.assert_allclose(result.posterior[j, 3:, 3:], obj.size_cov, rtol=1e-6, atol=1e-12)
         np.testing.assert_allclose(obj.error_cov, reported.covariance[j], rtol=1e-9)
+
+
+def test_floor_objects_count_the_floors_spread_not_their_prior(solved):
+    problem, _, system, state = solved
+    lin = system.linearize(*state)
+    weights = problem.keyframes.images_per_keyframe
+    shares = CONFIG.solver.error_covariance.bias_shares()
+    on_floor = np.array([CATALOG[problem.labels[p]].on_floor for p in system.layout.priors])
+    assert on_floor.any() and not on_floor.all()
+    standing = system.object_error_covariance_about_trajectory(lin, state, weights, shares).covariance
+    # The same map with the floor prior counted as stated: only its part differs.
+    system.prior_spread = system.prior_spread.copy()
+    system.prior_spread[on_floor, 2] = 1.0 / system.prior_inv_sigma[on_floor, 2]
+    stated = system.object_error_covariance_about_trajectory(lin, state, weights, shares).covariance
+    added = stated[:, 2, 2] - standing[:, 2, 2]
+    assert np.all(added[on_floor] > 0.1 * stated[on_floor, 2, 2])
+    # Raised objects share no prior with the floor ones; what they gain is through the poses.
+    assert np.all(np.abs(added[~on_floor]) < 0.05 * stated[~on_floor, 2, 2])
 
 
 def test_the_switch_turns_error_covariances_off():

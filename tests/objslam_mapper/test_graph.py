@@ -19,7 +19,7 @@ from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
 from objslam_mapper.gtsam_backend import build_gtsam_graph
 from objslam_mapper.initialization import initial_object
-from objslam_mapper.problem import GraphError, build_problem
+from objslam_mapper.problem import GraphError, build_problem, with_extra_priors
 from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.slice_model import predict_slices, slice_error
 from objslam_mapper.solver import solve
@@ -146,6 +146,23 @@ def test_raised_classes_get_a_wide_lower_edge_noise():
     cyan = problem.measurement_label == problem.labels.index("cyan")
     assert np.all(problem.measurement_stddev[cyan, 2] == CONFIG.slice_noise.raised_elevation_bottom_stddev_rad)
     assert np.all(problem.measurement_stddev[~cyan, 2] == CONFIG.slice_noise.elevation_bottom_stddev_rad)
+
+
+def test_priors_carry_the_spread_of_real_instances():
+    # A floor object's base-height prior is slack for the MAP; the error covariance counts
+    # the floor's own spread instead (0 by default: it stands on the floor).
+    _, problem = make_run(0, n_poses=10)
+    floor = np.array([CATALOG[label].on_floor for label in problem.labels])
+    assert floor.any() and not floor.all()
+    np.testing.assert_array_equal(problem.prior_spread[floor, 2], 0.0)
+    assert np.all(problem.prior_stddev[floor, 2] > 0.0)
+    keep = np.ones_like(problem.prior_spread, dtype=bool)
+    keep[floor, 2] = False
+    np.testing.assert_array_equal(problem.prior_spread[keep], problem.prior_stddev[keep])
+    # A distractor's extra prior row is its own spread.
+    extended, first = with_extra_priors(problem, np.zeros((1, 5)), np.full((1, 5), 0.7))
+    np.testing.assert_array_equal(extended.prior_spread[first], 0.7)
+    np.testing.assert_array_equal(extended.prior_spread[:first], problem.prior_spread)
 
 
 def test_low_confidence_slices_get_inflated_noise():

@@ -7,9 +7,13 @@ the odometry noise is a guess at an unknown robot. On ground-truth association t
 configured noise makes ``Λ⁻¹`` several times too large. So the covariances a map reports
 are those of the error of the estimate actually computed, the MAP under the configured
 weights ``x̂ = x + Λ⁻¹ Jᵀ e`` (whitened, linearized), under the noise the data show:
-``Cov = Λ⁻¹ B Λ⁻¹`` with ``B = Jᵀ Cov(e) J`` plus the priors' information (their
-variances taken as stated). A sandwich, as in M-estimation (Huber 1967, White 1980), with
-``Cov(e)`` made of two parts:
+``Cov = Λ⁻¹ B Λ⁻¹`` with ``B = Jᵀ Cov(e) J`` plus the priors' part. A sandwich, as in
+M-estimation (Huber 1967, White 1980). A prior adds the spread of the truth about its
+mean: its information scaled by ``(spread / stddev)²``, which is 1 where the prior is the
+spread of real instances (sizes, table heights) and 0 for a floor object's base height,
+whose truth is the prior's mean (it stands on the floor) and whose stddev is slack for the
+MAP (a floor prior as tight as the floor turns the detector's lower-edge bias into range
+error). ``Cov(e)`` of the measurements is made of two parts:
 
 - **White noise, each measurement's own**: the heteroscedasticity-consistent estimate
   ``r_i² / (1 - h_ii)`` (MacKinnon and White's HC2; ``h_ii`` the row's leverage
@@ -28,7 +32,8 @@ variances taken as stated). A sandwich, as in M-estimation (Huber 1967, White 19
 With whitened Jacobians ``J_k`` per noise group (bearing, width, lower edge, upper edge,
 odometry translation, odometry turn), the weights ``W_k = diag(r_i² / (1 - h_ii))`` and
 per-object indicator rows ``S_k`` (the object's share on its slices),
-``B = Λ_rest + Σ_k (J_kᵀ W_k J_k + (S_k J_k)ᵀ(S_k J_k))``. For reported rows ``R`` (the
+``B = D Λ_rest D + Σ_k (J_kᵀ W_k J_k + (S_k J_k)ᵀ(S_k J_k))``, ``Λ_rest`` the priors'
+information (diagonal) and ``D`` their spread over their stddev. For reported rows ``R`` (the
 objects about the trajectory, :mod:`objslam_mapper.gauge`), with ``X = Λ⁻¹ Rᵀ`` that is
 ``Xᵀ B X``. The MAP, the evidence and the existence test are unchanged: they are the model's.
 """
@@ -136,11 +141,14 @@ def error_covariance(
     information: NDArray[np.float64],
     groups: Sequence[NoiseGroup],
     rows: NDArray[np.float64],
+    prior_scale: NDArray[np.float64] | None = None,
 ) -> ErrorCovariance:
     """Covariance of the error of ``rows @ state`` (module docstring).
 
     ``information`` is the dense ``Λ`` the MAP was solved with: the groups' ``J_kᵀ J_k``
-    plus the priors' (the rest), at the MAP.
+    plus the priors' (the rest), at the MAP. ``prior_scale`` (n,) is, per state variable,
+    the spread of the truth about its prior's mean over the prior's stddev (``D``; default
+    1: every prior as stated).
     """
     try:
         factor = scipy.linalg.cho_factor(information, lower=False, check_finite=False)
@@ -167,6 +175,8 @@ def error_covariance(
             share = bias_shares(group, inverse, weights)
             common = _owner_rows(group, share[group.owner]) @ projected  # S_k J_k X
             covariance += common.T @ common
+    if prior_scale is not None:
+        rest *= np.outer(prior_scale, prior_scale)
     covariance += solved.T @ rest @ solved
     logger.debug("white noise over the configured: %s", ", ".join(f"{k} {v:.3g}" for k, v in levels.items()))
     return ErrorCovariance(0.5 * (covariance + covariance.T), 0.5 * (posterior + posterior.T), levels)

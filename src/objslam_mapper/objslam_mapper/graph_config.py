@@ -184,6 +184,10 @@ class ErrorCovarianceConfig:
     slice's configured stddev; the defaults are the detector's on the bundled bags
     (``scripts/object_bias.py bags/small bags/office``: root mean square over the objects
     of the mean of each object's whitened slice errors at the ground truth, rounded).
+    The class priors count with the spread of real instances about their means: as stated
+    for sizes and raised objects' base heights, ``floor_z_base_spread_m`` for floor objects,
+    whose catalog prior (1 cm) is looser than the floor on purpose (a tighter one turns the
+    detector's lower-edge bias into range error).
     """
 
     enabled: bool = setting(
@@ -199,6 +203,12 @@ class ErrorCovarianceConfig:
     angular_width_bias_share: float = setting(0.11, "... of the angular width", minimum=0.0)
     elevation_bottom_bias_share: float = setting(0.11, "... of the lower edge elevation", minimum=0.0)
     elevation_top_bias_share: float = setting(0.065, "... of the upper edge elevation", minimum=0.0)
+    floor_z_base_spread_m: float = setting(
+        0.0,
+        "stddev of real floor objects' base heights about the floor (m; 0: they stand on it). The error "
+        "covariance counts this, not the catalog's looser floor prior, which is slack for the MAP",
+        minimum=0.0,
+    )
 
     def bias_shares(self) -> tuple[float, float, float, float]:
         """Per slice component, in the order of objslam_mapper.slice_model.COMPONENTS."""

@@ -352,6 +352,7 @@ class AssociationSystem:
         self.calib_inv_sigma = 1.0 / problem.calibration_prior_stddev
         self.prior_mean = problem.prior_mean[layout.priors]
         self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.priors]
+        self.prior_spread = problem.prior_spread[layout.priors]
         self.log_normalizer = graph_log_normalizer(problem, layout)
         self.mounts = problem.mounts(layout.measurements)
 
@@ -761,7 +762,9 @@ class AssociationSystem:
         """(K, 5, 5) covariances of the objects' errors about the trajectory (:mod:`objslam_mapper.error_covariance`).
 
         ``lin`` is the linearization at ``state`` (poses, objects, calibration), with the
-        caps the MAP was solved with. Also in the result: the same rows' posterior, per object.
+        caps the MAP was solved with. The objects' class priors count with the spread of
+        real instances (``problem.prior_spread``). Also in the result: the same rows'
+        posterior, per object.
         """
         poses, objects, calib = state
         k, split = self.n_objects, POSE_DIM * self.n_poses
@@ -772,7 +775,9 @@ class AssociationSystem:
             motion = object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM).reshape(-1, GAUGE_DIM)
             rows[:, :split] -= motion @ gauge.rows
         groups = self.noise_groups(poses, objects, calib, object_bias_share)
-        result = error_covariance(self.information_matrix(lin), groups, rows)
+        prior_scale = np.ones(self.dimension)
+        prior_scale[split : split + OBJECT_DIM * k] = (self.prior_spread * self.prior_inv_sigma).ravel()
+        result = error_covariance(self.information_matrix(lin), groups, rows, prior_scale)
         diagonal = np.arange(k)
 
         def blocks(cov: NDArray) -> NDArray:

@@ -22,7 +22,10 @@ sampler (:func:`objslam_mapper.solver.solve`). It holds
   pose (``xy_stddev_m``), ``z_base`` and the size from the catalog. They are the first
   ``len(labels)`` *prior rows*; a group of a solve takes its class's row unless told
   otherwise, and :func:`with_extra_priors` appends rows for things that are not objects
-  of a class (the sampler's static distractors);
+  of a class (the sampler's static distractors). Beside each row's stddev, the spread of
+  real instances about its mean (``prior_spread``), which the error covariance counts: the
+  same but for a floor object's base height, whose prior is slack for the MAP (it stands
+  on the floor: ``solver.error_covariance.floor_z_base_spread_m``);
 - the log-normalizers ``-0.5 log|2 pi Sigma|`` of every Gaussian factor, for the evidence.
 
 Slices whose class is not in the catalog, and images outside the odometry span, are left
@@ -103,6 +106,9 @@ class GraphProblem:
     # Prior rows (P >= L): row k < L is class k's prior
     prior_mean: NDArray[np.float64]  # (P, 5)
     prior_stddev: NDArray[np.float64]  # (P, 5)
+    # (P, 5) stddev of real instances about prior_mean, what the error covariance counts:
+    # prior_stddev but where the model's prior is slack on purpose (a floor object's base height)
+    prior_spread: NDArray[np.float64]
     # Log-normalizers of the Gaussian factors
     trajectory_log_normalizer: float  # odometry factors + first-pose prior + calibration prior
     measurement_log_normalizer: NDArray[np.float64]  # (M,) Gaussian normalizer + log(1 - outlier probability)
@@ -150,11 +156,13 @@ def with_extra_priors(
     """``problem`` with prior rows ``mean``, ``stddev`` (R, 5) appended, and the index of the first."""
     first = len(problem.prior_mean)
     mean = np.concatenate([problem.prior_mean, np.asarray(mean, dtype=float).reshape(-1, OBJECT_DIM)])
-    stddev = np.concatenate([problem.prior_stddev, np.asarray(stddev, dtype=float).reshape(-1, OBJECT_DIM)])
+    extra = np.asarray(stddev, dtype=float).reshape(-1, OBJECT_DIM)
+    stddev = np.concatenate([problem.prior_stddev, extra])
     extended = dataclasses.replace(
         problem,
         prior_mean=read_only(mean),
         prior_stddev=read_only(stddev),
+        prior_spread=read_only(np.concatenate([problem.prior_spread, extra])),
         prior_log_normalizer=read_only(gaussian_log_normalizer(stddev)),
     )
     return extended, first
@@ -235,6 +243,9 @@ def build_problem(
     prior_stddev = np.array(
         [[c.xy_stddev_m, c.xy_stddev_m, c.z_base_stddev_m, c.diameter_stddev_m, c.height_stddev_m] for c in classes]
     )
+    prior_spread = prior_stddev.copy()
+    on_floor = np.array([c.on_floor for c in classes], dtype=bool)
+    prior_spread[on_floor, 2] = config.solver.error_covariance.floor_z_base_spread_m
     calibration = config.odometry.calibration
     calib_stddev = np.array(calibration.prior_stddev() if calibration.enabled else (), dtype=float)
     trajectory_norm = float(np.sum(gaussian_log_normalizer(inc_stddev)) + gaussian_log_normalizer(first_stddev))
@@ -261,6 +272,7 @@ def build_problem(
         measurement_slot=read_only(np.array(slot_of, dtype=np.int64)),
         prior_mean=read_only(prior_mean.reshape(-1, OBJECT_DIM)),
         prior_stddev=read_only(prior_stddev.reshape(-1, OBJECT_DIM)),
+        prior_spread=read_only(prior_spread.reshape(-1, OBJECT_DIM)),
         trajectory_log_normalizer=trajectory_norm,
         measurement_log_normalizer=read_only(gaussian_norm + inlier_log_weight(noise.outlier_probability)),
         measurement_outlier_cost=read_only(
