@@ -26,19 +26,14 @@ import dataclasses
 import numpy as np
 from scipy.stats import chi2
 
-from objslam_detector.config import DetectorConfig
-from objslam_detector.detector import Detector
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.config import default_config_dir, load_config
 from objslam_mapper.gauge import object_motion, trajectory_gauge
 from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.problem import build_problem
 from objslam_mapper.solver import solve
-from objslam_tools.bag import open_bag
-from objslam_tools.evaluate import align_track, load_reference, nees_summary
-from objslam_tools.mapper_inputs import detect_bag, odometry_samples
-from objslam_tools.oracle_map import oracle_association
+from objslam_tools.evaluate import align_track, nees_summary
+from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.trajectory import PoseTrack
 
 
@@ -76,15 +71,7 @@ def main() -> None:
     # One graph pose per image: the fit below is over the poses the map reports.
     keyframes = dataclasses.replace(config.solver.keyframes, enabled=False)
     config = dataclasses.replace(config, solver=dataclasses.replace(config.solver, backend="fast", keyframes=keyframes))
-    catalog = load_catalog(config.catalog_file or None)
-    bag = open_bag(args.bag)
-    reference = load_reference(args.bag)
-    detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
-    images = detect_bag(bag, detector, lambda *_: None)
-    problem = build_problem(odometry_samples(bag), images, config.graph.camera_mount.to_mount(), catalog, config.graph)
-    by_truth = oracle_association(problem, images, config, reference.ground_truth, reference.ground_truth_track).groups
-    truth_ids = sorted(by_truth)
-    groups = [by_truth[k] for k in truth_ids]
+    problem, reference, truth_ids, groups = oracle_problem(args.bag, config, load_catalog(config.catalog_file or None))
     solution = solve(problem, groups)
     covariance = joint_covariance(problem, groups, solution)
 

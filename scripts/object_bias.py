@@ -6,10 +6,11 @@ For each simulated BAG: detect, chain, give every slice the real object that exp
 (the oracle of `objslam map --association oracle`), and take each slice's error at the
 ground truth (ground-truth pose and object), whitened by the slice's configured stddev.
 The mean of one object's whitened errors is its bias (hundreds of slices average the white
-noise away; their standard deviation is printed beside it); printed per object, then the
-root mean square over the objects of all BAGs per component: the bias share of
-objslam_mapper.error_covariance (the stddev of an error common to all slices of an
-object, in units of the slices' configured stddev). A measurement of the detector, not part of the package.
+noise away; their standard deviation is printed beside it); printed per object with the
+mean over the bag's objects (a bias all of them share), then the root mean square over
+the objects of all BAGs per component: the bias share of objslam_mapper.error_covariance
+(the stddev of an error common to all slices of an object, in units of the slices'
+configured stddev). A measurement of the detector, not part of the package.
 """
 
 from __future__ import annotations
@@ -18,32 +19,20 @@ import argparse
 
 import numpy as np
 
-from objslam_detector.config import DetectorConfig
-from objslam_detector.detector import Detector
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.config import default_config_dir, load_config
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.problem import build_problem
 from objslam_mapper.slice_model import BEARING, COMPONENTS, predict_reduced
-from objslam_tools.bag import open_bag
-from objslam_tools.evaluate import load_reference
-from objslam_tools.mapper_inputs import detect_bag, odometry_samples
-from objslam_tools.oracle_map import oracle_association
+from objslam_tools.oracle_map import oracle_problem
 
 
 def object_biases(bag_path: str, config: MapperConfig) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
     """(label, slice count, mean and standard deviation of the whitened errors (4,)) per real object of the bag."""
-    catalog = load_catalog(config.catalog_file or None)
-    bag = open_bag(bag_path)
-    reference = load_reference(bag_path)
-    detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
-    images = detect_bag(bag, detector, lambda *_: None)
-    problem = build_problem(odometry_samples(bag), images, config.graph.camera_mount.to_mount(), catalog, config.graph)
-    by_truth = oracle_association(problem, images, config, reference.ground_truth, reference.ground_truth_track).groups
+    problem, reference, truth_ids, groups = oracle_problem(bag_path, config, load_catalog(config.catalog_file or None))
     truth = {o.id: o for o in reference.ground_truth.objects}
     out = []
-    for object_id, members in sorted(by_truth.items()):
+    for object_id, members in zip(truth_ids, groups, strict=True):
         index = np.array(members)
         poses = reference.ground_truth_track.interpolate(problem.stamps_ns[problem.measurement_pose[index]])
         count = len(index)
@@ -68,10 +57,15 @@ def main() -> None:
     header = "  ".join(f"{c:>16s}" for c in COMPONENTS)
     for bag in args.bags:
         print(f"{bag}: mean / standard deviation of each object's whitened errors\n  label   slices  {header}")
+        bag_means = []
         for label, count, mean, spread in object_biases(bag, config):
-            means.append(mean)
+            bag_means.append(mean)
             cells = "  ".join(f"{m:7.3f} / {d:6.3f}" for m, d in zip(mean, spread, strict=True))
             print(f"  {label:6s} {count:7d}  {cells}")
+        # What all objects share: a bias of the detector in this scene, which moves the map's scale.
+        common = np.mean(bag_means, axis=0)
+        print("  mean over the objects  " + "  ".join(f"{m:16.3f}" for m in common))
+        means += bag_means
     rms = np.sqrt(np.mean(np.square(means), axis=0))
     print(f"bias share (root mean square of the means over {len(means)} objects):")
     print("  " + "  ".join(f"{c} {v:.3f}" for c, v in zip(COMPONENTS, rms, strict=True)))

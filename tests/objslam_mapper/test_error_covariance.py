@@ -271,6 +271,21 @@ def test_slice_rows_know_their_object_and_share(solved):
     assert all(g.owner is None for g in system.noise_groups(*state, shares)[4:])
 
 
+def test_noise_groups_keep_the_slices_they_are_told(solved):
+    # The rows of one state's kept slices at another state (scripts/error_budget.py: the MAP's at the truth).
+    _, _, system, state = solved
+    shares = CONFIG.solver.error_covariance.bias_shares()
+    kept = system.inlier_slices(*state[:2])
+    assert kept.all()  # no slice capped in this run
+    kept[[0, 5]] = False
+    default, told = system.noise_groups(*state, shares), system.noise_groups(*state, shares, kept)
+    for full, fewer in zip(default[:4], told[:4], strict=True):
+        np.testing.assert_array_equal(fewer.residual, full.residual[kept])
+        np.testing.assert_array_equal(fewer.owner, full.owner[kept])
+        np.testing.assert_allclose(fewer.jacobian.toarray(), full.jacobian.toarray()[kept])
+    assert all(len(a.residual) == len(b.residual) for a, b in zip(default[4:], told[4:], strict=True))
+
+
 def test_the_posterior_rows_are_the_solvers_covariances_about_the_trajectory(solved):
     problem, solution, system, state = solved
     lin = system.linearize(*state)

@@ -14,7 +14,7 @@ from objslam_mapper.slice_model import predict_slices
 from objslam_tools.cli import main
 from objslam_tools.evaluate import Reference, score_map
 from objslam_tools.ground_truth import GroundTruth
-from objslam_tools.oracle_map import build_oracle_map, oracle_groups
+from objslam_tools.oracle_map import build_oracle_map, oracle_groups, oracle_problem
 from objslam_tools.trajectory import PoseTrack, transform_poses
 from tests.objslam_tools import synthetic_scene as scene
 
@@ -110,3 +110,16 @@ def test_merged_blobs_are_left_out_of_the_known_association():
     assert built.diagnostics["inconsistent_measurements"] > 0
     score = score_map(built, Reference(TRUTH, GT_TRACK, PoseTrack(STAMPS, ODOM_POSES)), gate_m=0.5)
     assert score.metrics()["xy_error_max_m"] < 0.05
+
+
+def test_oracle_problem_of_a_bag_groups_the_slices_by_their_real_object(repo_root):
+    problem, reference, truth_ids, groups = oracle_problem(
+        str(repo_root / "bags" / "small"), MapperConfig(), load_catalog()
+    )
+    truth = {o.id: o for o in reference.ground_truth.objects}
+    assert sorted(truth_ids) == truth_ids and set(truth_ids) <= set(truth)
+    assert len(truth_ids) == len(truth)  # bags/small: every object is seen
+    for truth_id, members in zip(truth_ids, groups, strict=True):
+        assert len(members) > 10
+        assert {problem.label_of(m) for m in members} == {truth[truth_id].label}
+    assert len({m for g in groups for m in g}) == sum(len(g) for g in groups)  # no slice in two groups

@@ -528,22 +528,35 @@ class AssociationSystem:
         """The dense ``Lambda`` of a linearization (rows as in the sparse system)."""
         return self._sparse_information(lin).toarray()
 
+    def inlier_slices(self, poses: NDArray, objects: NDArray) -> NDArray[np.bool_]:
+        """(M,) the layout's slices within their cap (``cap_scale``) at this state."""
+        _, sl = self._whitened_slices(poses, objects)
+        if not (self.has_outlier_model and self.cap_scale < np.inf):
+            return np.ones(sl.shape[1], dtype=bool)
+        return half_chi2(sl) <= self.outlier_cost * self.cap_scale
+
     def noise_groups(
-        self, poses: NDArray, objects: NDArray, calib: NDArray, object_bias_share: Sequence[float]
+        self,
+        poses: NDArray,
+        objects: NDArray,
+        calib: NDArray,
+        object_bias_share: Sequence[float],
+        inliers: NDArray[np.bool_] | None = None,
     ) -> list[NoiseGroup]:
         """Whitened rows of the slices (one group per component) and of the odometry (translation, turn).
 
         Slices beyond their cap (``cap_scale``) are left out, as the information leaves
-        them out. Slice rows know their object, whose slices share a bias of ``object_bias_share``
-        (one per component) times their configured stddev (:mod:`objslam_mapper.error_covariance`).
+        them out; ``inliers`` (M,) says which to keep instead (those of another state: the
+        rows at the truth of the slices the MAP kept). Slice rows know their object, whose
+        slices share a bias of ``object_bias_share`` (one per component) times their
+        configured stddev (:mod:`objslam_mapper.error_covariance`).
         """
         n, dim = self.n_poses, self.dimension
         lay = self.layout
         pred, sl = self._whitened_slices(poses, objects)
-        inlier = np.ones(sl.shape[1], dtype=bool)
-        if self.has_outlier_model and self.cap_scale < np.inf:
-            inlier = half_chi2(sl) <= self.outlier_cost * self.cap_scale
-        kept = np.flatnonzero(inlier)
+        if inliers is None:
+            inliers = self.inlier_slices(poses, objects)
+        kept = np.flatnonzero(inliers)
         jac = pred.jacobian[:, :, kept] * self.inv_sigma[:, None, kept]
         columns = np.concatenate(
             [

@@ -9,7 +9,8 @@ and slices the model cannot explain from their object at the truth (merged blobs
 :func:`objslam_tools.oracle.truth_residual_chi2`), are left out (clutter), and the map is
 one known-association solve with marginals
 (:func:`objslam_mapper.baselines.map_of_groups`). It lives here, not in the core, because
-the core never reads ground truth.
+the core never reads ground truth. :func:`oracle_problem` gives the diagnostics in
+``scripts/`` a simulated bag's problem and its ground-truth association in one call.
 """
 
 from __future__ import annotations
@@ -21,14 +22,20 @@ from typing import NamedTuple
 
 import numpy as np
 
+from objslam_detector.config import DetectorConfig
+from objslam_detector.detector import Detector
 from objslam_mapper.baselines import map_of_groups
 from objslam_mapper.catalog import Catalog
+from objslam_mapper.config import load_config
 from objslam_mapper.map_file import BuiltMap
 from objslam_mapper.pipeline import MapperConfig
 from objslam_mapper.problem import GraphProblem, build_problem
 from objslam_mapper.records import ImageSlices, OdometrySample
 from objslam_mapper.tracklets import tracklets_of_problem
+from objslam_tools.bag import open_bag
+from objslam_tools.evaluate import Reference, load_reference
 from objslam_tools.ground_truth import GroundTruth
+from objslam_tools.mapper_inputs import detect_bag, odometry_samples
 from objslam_tools.oracle import OracleOptions, oracle_assignment, truth_residual_chi2
 from objslam_tools.trajectory import PoseTrack
 
@@ -110,6 +117,28 @@ def oracle_association(
     return OracleAssociation(
         groups, len(chained.tracklets), len(chained.dropped_measurements), len(in_tracklets), inconsistent
     )
+
+
+class OracleProblem(NamedTuple):
+    """A simulated bag's factor-graph problem and its ground-truth association, for diagnostics."""
+
+    problem: GraphProblem
+    reference: Reference
+    truth_ids: list[int]  # real object of each group
+    groups: list[list[int]]  # measurement indices per real object, in truth_ids order
+
+
+def oracle_problem(bag_path: str, config: MapperConfig, catalog: Catalog) -> OracleProblem:
+    """Detect a simulated bag with the default detector and associate its slices by the ground truth."""
+    bag = open_bag(bag_path)
+    reference = load_reference(bag_path)
+    detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
+    images = detect_bag(bag, detector, lambda *_: None)
+    graph = config.graph
+    problem = build_problem(odometry_samples(bag), images, graph.camera_mount.to_mount(), catalog, graph)
+    by_truth = oracle_association(problem, images, config, reference.ground_truth, reference.ground_truth_track).groups
+    truth_ids = sorted(by_truth)
+    return OracleProblem(problem, reference, truth_ids, [by_truth[i] for i in truth_ids])
 
 
 def build_oracle_map(
