@@ -4,8 +4,9 @@ Usage: python scripts/error_budget.py BAG [--params FILE] [--calibration DS TS T
 
 Solves the ground-truth association of a simulated BAG (as `objslam map --association
 oracle` does), then evaluates every factor at the ground truth, taken into the map's
-frame by the trajectory fit of `objslam eval`. Linearized at the MAP, the estimate's
-error is ``-Λ⁻¹ (Σ_k J_kᵀ r_k + P (x_true - μ))``: each noise group's whitened errors at
+frame by the trajectory fit of `objslam eval`. Linearized at the truth (where the
+odometry calibration's bilinear terms leave the MAP's curvature a poor guide), the
+estimate's error is ``-Λ⁻¹ (Σ_k J_kᵀ r_k + P (x_true - μ))``: each noise group's whitened errors at
 the truth ``r_k`` and each prior's offset of the truth from its mean add their own part.
 Slice groups are split into each object's mean error (its bias) and the rest (white or
 serially correlated). The objects' errors are taken about the trajectory, as the map's
@@ -32,14 +33,14 @@ from objslam_mapper.catalog import load_catalog
 from objslam_mapper.config import default_config_dir, load_config
 from objslam_mapper.error_covariance import _owner_rows
 from objslam_mapper.gauge import GAUGE_DIM, object_motion, trajectory_gauge
-from objslam_mapper.geometry import wrap_angle
+from objslam_mapper.geometry import inverse, transform_points, wrap_angle
 from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
 from objslam_mapper.pipeline import MapperConfig
 from objslam_mapper.problem import GraphProblem
 from objslam_mapper.solver import GraphSolution, solve
 from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.sim.motion import OdometryNoise
-from objslam_tools.trajectory import fit_se2
+from objslam_tools.trajectory import fit_se2, transform_poses
 
 Z = 2  # z_base in an object's (x, y, z_base, diameter, height)
 
@@ -80,24 +81,21 @@ def error_budget(
     )
 
     true_poses, true_objects, true_calib = (np.array(t, dtype=float) for t in truth)
-    truth_T_map = fit_se2(poses[:, :2], true_poses[:, :2])
-    c, s = np.cos(truth_T_map[2]), np.sin(truth_T_map[2])
-    rotation = np.array([[c, -s], [s, c]])
-    true_poses[:, :2] = (true_poses[:, :2] - truth_T_map[:2]) @ rotation
-    true_poses[:, 2] = wrap_angle(true_poses[:, 2] - truth_T_map[2])
-    true_objects[:, :2] = (true_objects[:, :2] - truth_T_map[:2]) @ rotation
+    map_T_truth = inverse(fit_se2(poses[:, :2], true_poses[:, :2]))
+    true_poses = transform_poses(map_T_truth, true_poses)
+    true_objects[:, :2] = transform_points(map_T_truth, true_objects[:, :2])
 
     # Linearized at the truth: the odometry calibration enters bilinearly, and along its weak
     # directions the curvature at the MAP, a standard deviation away, predicts the error poorly.
     truth_groups = system.noise_groups(true_poses, true_objects, true_calib, shares, kept)
-    inverse = np.linalg.inv(priors + sum((g.jacobian.T @ g.jacobian).toarray() for g in truth_groups))
+    covariance = np.linalg.inv(priors + sum((g.jacobian.T @ g.jacobian).toarray() for g in truth_groups))
 
     k, split = system.n_objects, POSE_DIM * system.n_poses
     rows = np.zeros((OBJECT_DIM * k, system.dimension))
     rows[:, split : split + OBJECT_DIM * k] = np.eye(OBJECT_DIM * k)
     gauge = trajectory_gauge(poses[:, :2], keyframes.images_per_keyframe)
     rows[:, :split] -= object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM).reshape(-1, GAUGE_DIM) @ gauge.rows
-    solved = inverse @ rows.T  # X = Λ⁻¹ Rᵀ
+    solved = covariance @ rows.T  # X = Λ⁻¹ Rᵀ
 
     def per_object(vector: np.ndarray) -> np.ndarray:
         return vector.reshape(k, OBJECT_DIM)
@@ -135,8 +133,7 @@ def error_budget(
         offsets[-len(calib) :] = true_calib / problem.calibration_prior_stddev**2
     # Each prior's information scaled to the spread of the truth about its mean, as the map's
     # error covariance counts it (objslam_mapper.error_covariance).
-    spread = (system.prior_spread * system.prior_inv_sigma).ravel() ** 2
-    counted = np.diag(priors) * np.r_[np.ones(split), spread, np.ones(len(calib))]
+    counted = np.diag(priors) * system.prior_scale() ** 2
     calibration_columns = np.arange(split + OBJECT_DIM * k, system.dimension)
     for name, index in (
         ("prior base height", split + OBJECT_DIM * np.arange(k) + Z),

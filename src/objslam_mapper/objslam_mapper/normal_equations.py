@@ -530,10 +530,23 @@ class AssociationSystem:
 
     def inlier_slices(self, poses: NDArray, objects: NDArray) -> NDArray[np.bool_]:
         """(M,) the layout's slices within their cap (``cap_scale``) at this state."""
-        _, sl = self._whitened_slices(poses, objects)
+        return self._within_caps(self._whitened_slices(poses, objects)[1])
+
+    def _within_caps(self, whitened: NDArray) -> NDArray[np.bool_]:
         if not (self.has_outlier_model and self.cap_scale < np.inf):
-            return np.ones(sl.shape[1], dtype=bool)
-        return half_chi2(sl) <= self.outlier_cost * self.cap_scale
+            return np.ones(whitened.shape[1], dtype=bool)
+        return half_chi2(whitened) <= self.outlier_cost * self.cap_scale
+
+    def prior_scale(self) -> NDArray[np.float64]:
+        """(n,) per variable, the spread of the truth about its prior's mean over the prior's stddev.
+
+        1 but for the objects' class priors (``problem.prior_spread``): what the error
+        covariance scales each prior's information by (:mod:`objslam_mapper.error_covariance`).
+        """
+        scale = np.ones(self.dimension)
+        first = POSE_DIM * self.n_poses
+        scale[first : first + OBJECT_DIM * self.n_objects] = (self.prior_spread * self.prior_inv_sigma).ravel()
+        return scale
 
     def noise_groups(
         self,
@@ -554,9 +567,7 @@ class AssociationSystem:
         n, dim = self.n_poses, self.dimension
         lay = self.layout
         pred, sl = self._whitened_slices(poses, objects)
-        if inliers is None:
-            inliers = self.inlier_slices(poses, objects)
-        kept = np.flatnonzero(inliers)
+        kept = np.flatnonzero(self._within_caps(sl) if inliers is None else inliers)
         jac = pred.jacobian[:, :, kept] * self.inv_sigma[:, None, kept]
         columns = np.concatenate(
             [
@@ -788,9 +799,7 @@ class AssociationSystem:
             motion = object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM).reshape(-1, GAUGE_DIM)
             rows[:, :split] -= motion @ gauge.rows
         groups = self.noise_groups(poses, objects, calib, object_bias_share)
-        prior_scale = np.ones(self.dimension)
-        prior_scale[split : split + OBJECT_DIM * k] = (self.prior_spread * self.prior_inv_sigma).ravel()
-        result = error_covariance(self.information_matrix(lin), groups, rows, prior_scale)
+        result = error_covariance(self.information_matrix(lin), groups, rows, self.prior_scale())
         diagonal = np.arange(k)
 
         def blocks(cov: NDArray) -> NDArray:
