@@ -6,14 +6,19 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from objslam_mapper.camera import CameraMount
 from objslam_mapper.catalog import load_catalog
 from objslam_mapper.detection import (
     DetectionConfig,
+    Sight,
     detection_log_likelihood,
     hidden,
     sight,
+    sightings,
+    table_sight,
     view_top_elevation,
     visible,
 )
@@ -94,3 +99,83 @@ def test_a_thing_is_hidden_by_any_nearer_one_that_covers_it():
     assert hidden(seen, seen, CONFIG).tolist() == [[True, False, True]] * 2
     assert hidden(seen, seen.columns([2]), CONFIG).tolist() == [[False, False, False]] * 2  # nothing behind
     assert visible(seen, seen, CONFIG).tolist() == [[False, True, False]] * 2
+
+
+def test_nearer_things_hide_what_they_cover_together():
+    far = [5.0, 0.0, 0.0, 0.4, 0.4]
+    # Side by side, each covers less than half of the far one's bearing interval; together all of it.
+    left, right = [2.5, 0.06, 0.0, 0.12, 0.4], [2.5, -0.06, 0.0, 0.12, 0.4]
+    assert _shown(ROBOT, [far, left]).tolist() == [[True, True]]
+    assert _shown(ROBOT, [far, right]).tolist() == [[True, True]]
+    assert _shown(ROBOT, [far, left, right]).tolist() == [[False, True, True]]
+
+
+def test_a_short_thing_does_not_hide_a_tall_one_that_stands_out_above_it():
+    tall = [4.0, 0.0, 0.0, 0.2, 0.9]  # its silhouette reaches 0.1 rad above the camera
+    short = [2.0, 0.0, 0.0, 0.5, 0.2]  # in front of all of its bearing interval, but only its lower third
+    assert _shown(ROBOT, [tall, short]).tolist() == [[True, True]]
+    assert _shown(ROBOT, [tall, [2.0, 0.0, 0.0, 0.5, 0.6]]).tolist() == [[False, True]]
+
+
+def _sightings_with_tables(things, on_table, poses=ROBOT):
+    return sightings(
+        _Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), [], CONFIG, 0.4, on_table
+    )
+
+
+def test_a_table_hides_what_is_behind_it_but_not_the_object_on_it():
+    on_table = [2.0, 0.0, 0.72, 0.15, 0.25]
+    behind = [4.0, 0.1, 0.0, 0.3, 0.6]
+    # The object on the table alone is above what is behind it and too narrow; its table hides it.
+    assert not _sightings_with_tables([on_table, behind], [False, False]).hidden.any()
+    assert _sightings_with_tables([on_table, behind], [True, False]).hidden.tolist() == [[False, True]]
+    # Tables stand under their objects only: no table, or none configured, hides nothing.
+    tables = table_sight(_Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [True, False], CONFIG)
+    assert tables.range_m[0, 1] == np.inf and not tables.in_view.any()
+    assert tables.width[0, 0] == pytest.approx(2 * np.arcsin(CONFIG.table_diameter_m / 2 / 2.0))
+    assert tables.top[0, 0] == pytest.approx(np.arctan2(0.72 - MOUNT.height_m, 2.0 - CONFIG.table_diameter_m / 2))
+    no_tables = DetectionConfig(table_diameter_m=0.0)
+    seen = sightings(
+        _Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [], no_tables, 0.4, [True, False]
+    )
+    assert not seen.hidden.any()
+
+
+def test_an_object_on_a_table_behind_another_table_shows_above_it_unless_far_behind():
+    near = [2.0, 0.0, 0.72, 0.15, 0.25]
+    # Beside the near object, behind its table: 0.6 m behind, the table covers the lowest 40 % of
+    # its silhouette; 2 m behind, all of it (from 0.5 m high, the near table's edge is higher in
+    # the image than the far object's top).
+    just_behind, far_behind = [2.6, 0.2, 0.72, 0.15, 0.25], [4.0, 0.3, 0.72, 0.15, 0.25]
+    assert _sightings_with_tables([near, just_behind], [True, True]).hidden.tolist() == [[False, False]]
+    assert _sightings_with_tables([near, far_behind], [True, True]).hidden.tolist() == [[False, True]]
+
+
+def _rectangle(bearing, width, bottom, top, range_m):
+    return Sight(*(np.array([[v]], dtype=float) for v in (bearing, width, bottom, top, range_m)), np.array([[True]]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    offset=st.floats(-0.3, 0.3),
+    width=st.floats(0.02, 0.4),
+    occ_width=st.floats(0.02, 0.6),
+    bottom=st.floats(-0.5, 0.2),
+    height=st.floats(0.02, 0.4),
+    occ_bottom=st.floats(-0.6, 0.3),
+    occ_height=st.floats(0.02, 0.8),
+)
+def test_the_cover_of_one_occluder_is_the_share_of_the_silhouette_it_overlaps(
+    offset, width, occ_width, bottom, height, occ_bottom, occ_height
+):
+    row = _rectangle(0.1, width, bottom, bottom + height, 4.0)
+    occluder = _rectangle(0.1 + offset, occ_width, occ_bottom, occ_bottom + occ_height, 2.0)
+    in_bearing = max(0.0, min(width / 2, offset + occ_width / 2) - max(-width / 2, offset - occ_width / 2)) / width
+    top = min(bottom + height, occ_bottom + occ_height)
+    in_elevation = max(0.0, top - max(bottom, occ_bottom)) / height
+    share = in_bearing * in_elevation
+    # Measured on a grid of 16 x 16 points: exact but near the threshold.
+    if abs(share - CONFIG.occlusion_cover) > 2.5 / 16:
+        assert hidden(row, occluder, CONFIG)[0, 0] == (share > CONFIG.occlusion_cover)
+    # Only nearer things hide.
+    assert not hidden(row, _rectangle(0.1 + offset, occ_width, occ_bottom, occ_bottom + occ_height, 5.0), CONFIG)[0, 0]

@@ -87,6 +87,7 @@ from objslam_mapper.detection import (
     miss_count_log_likelihood,
     sight,
     sightings,
+    table_sight,
     view_top_elevation,
     visible,
 )
@@ -268,6 +269,17 @@ class AssociationTarget:
             return self.clutter.distractor_row(int(members[0]))
         return int(self.problem.measurement_label[members[0]])
 
+    def _on_table(self, groups: Sequence[GraphGroup], members: Sequence[NDArray[np.int64]]) -> NDArray[np.bool_]:
+        """Which groups stand on a table: objects of a class whose base is above the floor
+        (DESIGN.md); distractors are posters and patches, which stand on nothing."""
+        return np.array(
+            [
+                g[0] == _OBJECT and self.problem.prior_mean[self._prior_row(g, m), 2] > 0.0
+                for g, m in zip(groups, members, strict=True)
+            ],
+            dtype=bool,
+        )
+
     def groups(self, state: Association) -> list[NDArray[np.int64]]:
         """Measurement indices of each object of ``state``, in its object order."""
         return [self._measurements((_OBJECT, g)) for g in state.groups]
@@ -432,8 +444,10 @@ class AssociationTarget:
         if cached is not None and cached[0] is map_T_base:
             self._sights.move_to_end(state)
             return cached[1]
-        members = [self._measurements(g) for g in self.graph_groups(state)]
-        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad)
+        groups = self.graph_groups(state)
+        members = [self._measurements(g) for g in groups]
+        on_table = self._on_table(groups, members)
+        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad, on_table)
         self._sights[state] = (map_T_base, seen)
         if len(self._sights) > _REFERENCE_CACHE_SIZE:
             self._sights.popitem(last=False)
@@ -455,9 +469,13 @@ class AssociationTarget:
         n_miss = -int(np.count_nonzero(seen.missed[:, lost])) if lost else 0
         if gained:
             gained_estimates = np.array([self._conditional(state, g)[1] for g in gained])
+            gained_members = [self._measurements(g) for g in gained]
             fresh = sight(self.problem, poses, gained_estimates, self.detection, self.view_top_rad)
-            shown = visible(fresh, Sight.join([seen.sight.columns(kept), fresh]), self.detection)
-            hit = hit_matrix(self.problem, len(poses), [self._measurements(g) for g in gained])
+            fresh_tables = table_sight(
+                self.problem, poses, gained_estimates, self._on_table(gained, gained_members), self.detection
+            )
+            shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), self.detection)
+            hit = hit_matrix(self.problem, len(poses), gained_members)
             n_miss += int(np.count_nonzero(shown & ~hit))
         return miss_count_log_likelihood(n_miss, self.detection)
 
