@@ -19,7 +19,7 @@ from objslam_mapper.geometry import between, wrap_angle
 from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
 from objslam_mapper.gtsam_backend import build_gtsam_graph
 from objslam_mapper.initialization import initial_object
-from objslam_mapper.problem import GraphError, build_problem, with_extra_priors
+from objslam_mapper.problem import GraphError, at_view_top, build_problem, with_extra_priors
 from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.slice_model import predict_slices, slice_error
 from objslam_mapper.solver import solve
@@ -171,6 +171,42 @@ def test_low_confidence_slices_get_inflated_noise():
     problem = build_problem(odom, [ImageSlices(5, (sure, cut))], MOUNT, CATALOG, CONFIG)
     scale = CONFIG.slice_noise.low_confidence_stddev_scale
     np.testing.assert_allclose(problem.measurement_stddev[1], scale * problem.measurement_stddev[0])
+
+
+def test_upper_edges_where_cut_blobs_pile_up_are_found_at_the_top_of_the_view():
+    top = 0.427
+    rows = [
+        # Four upper edges within 3 mrad at one bearing: the view's edge (on both sides of -pi).
+        (-3.13, 0.1, 0.1, top),
+        (-3.12, 0.1, 0.1, top - 0.003),
+        (3.13, 0.1, 0.1, top - 0.001),
+        (3.12, 0.1, 0.1, top - 0.002),
+        (3.12, 0.1, 0.1, top - 0.05),  # lower: the object's own top
+        # Elsewhere one tall object's top seen twice, and a view edge higher in the corners.
+        (1.0, 0.1, 0.1, 0.40),
+        (1.01, 0.1, 0.1, 0.40),
+        (0.79, 0.1, 0.1, 0.60),
+        (0.78, 0.1, 0.1, 0.598),
+        (0.785, 0.1, 0.1, 0.599),
+    ]
+    flagged = at_view_top(np.array(rows), 0.007).tolist()
+    assert flagged == [True] * 4 + [False] * 3 + [True] * 3
+    assert at_view_top(np.array(rows), 0.0005).tolist() == [False] * 10  # too few that close
+    assert at_view_top(np.zeros((0, 4)), 0.007).tolist() == []
+
+
+def test_upper_edges_cut_by_the_view_are_lower_bounds():
+    odom = [OdometrySample(0, 0.0, 0.0, 0.0), OdometrySample(10, 1.0, 0.0, 0.0)]
+    cut = [SliceMeasurement("blue", 0.4, 0.3 + 0.001 * k, 0.1, -0.2, 0.427) for k in range(3)]
+    sure = SliceMeasurement("blue", 0.9, 0.3, 0.1, -0.2, 0.427)  # at the top but whole: its own top
+    below = SliceMeasurement("blue", 0.4, 0.3, 0.1, -0.2, 0.3)  # cut short, not by the view
+    images = [ImageSlices(1 + k, (c,)) for k, c in enumerate(cut)] + [ImageSlices(5, (sure, below))]
+    problem = build_problem(odom, images, MOUNT, CATALOG, CONFIG)
+    assert problem.measurement_censored_top.tolist() == [True, True, True, False, False]
+    scale = CONFIG.slice_noise.low_confidence_stddev_scale
+    np.testing.assert_allclose(problem.measurement_stddev[[0, 1, 2, 4]], scale * problem.measurement_stddev[[3] * 4])
+    off = dataclasses.replace(CONFIG, slice_noise=dataclasses.replace(CONFIG.slice_noise, censor_view_top=False))
+    assert not build_problem(odom, images, MOUNT, CATALOG, off).measurement_censored_top.any()
 
 
 @pytest.mark.parametrize(

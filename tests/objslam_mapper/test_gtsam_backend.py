@@ -30,6 +30,7 @@ from objslam_mapper.gtsam_backend import (
 )
 from objslam_mapper.problem import build_problem
 from objslam_mapper.records import ImageSlices
+from objslam_mapper.slice_model import predict_slices
 from objslam_mapper.solver import solve
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
@@ -323,3 +324,33 @@ def test_time_naive_solves_counts_what_it_timed(reference):
     assert time_naive_solves(problem, [groups, groups], max_seconds=0.0)[1] == 1
     with pytest.raises(GtsamBackendError):
         time_naive_solves(problem, [], max_seconds=1.0)
+
+
+def test_upper_edges_cut_by_the_view_are_lower_bounds_in_both_backends(reference):
+    problem, groups, ours = reference
+    poses, objects, calibration = state(ours)
+    # Every third slice's upper edge was cut by the view; half of them read 0.05 rad above
+    # the MAP's upper edge (the model's lies below the bound: it costs), half below (free).
+    cut = np.zeros(problem.measurement_count, dtype=bool)
+    cut[::3] = True
+    measured = np.array(problem.measurements)
+    owner = ours.object_of_measurement
+    at = predict_slices(poses[problem.measurement_pose], objects[owner, :3], objects[owner, 3:], problem.mount)
+    offset = np.where(np.arange(problem.measurement_count) % 2 == 0, 0.05, -0.05)
+    measured[cut, 3] = at.values[cut, 3] + offset[cut]
+    censored = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
+    graph, keys = build_gtsam_graph(censored, groups, per_detection=True, cap_scale=math.inf)
+    values = keys.to_values(poses, objects, calibration)
+    slice_factors = [i for i in range(graph.size()) if isinstance(graph.at(i), gtsam.CustomFactor)][N_POSES:]
+    for index, m in zip(slice_factors, np.concatenate(groups), strict=True):
+        error = (at.values[m] - measured[m]) / problem.measurement_stddev[m]
+        error[0] = np.angle(np.exp(1j * error[0] * problem.measurement_stddev[m, 0])) / problem.measurement_stddev[m, 0]
+        if cut[m] and offset[m] < 0.0:
+            error[3] = 0.0  # above the bound: no cost, no information
+            jacobian, _ = gtsam.JacobianFactor(graph.at(index).linearize(values)).jacobian()
+            assert not jacobian[3].any()
+        assert graph.at(index).error(values) == pytest.approx(0.5 * float(error @ error), rel=1e-9, abs=1e-12)
+    # Both backends solve the one-sided factors to the same numbers, and they move the map.
+    fast = solve(censored, groups, with_covariances=True)
+    assert_same_solution(solve_gtsam(censored, groups, with_covariances=True), fast)
+    assert np.abs(state(fast)[1] - objects).max() > 1e-4

@@ -349,3 +349,26 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
     green = next(g for g in old if chained.labels[g[1][0]] == "green")
     groups = target.graph_groups(moves[0])
     assert missed(groups, np.array([kept_estimate[g] for g in groups]))[green] > before[green]
+
+
+def test_the_target_takes_upper_edges_as_measured_and_the_map_as_lower_bounds():
+    problem = problem_of(simulate((RED_A, GREEN)))
+    cut = np.zeros(problem.measurement_count, dtype=bool)
+    cut[::2] = True
+    # Every other upper edge was cut by the view, 0.05 rad below the object's: as measured they
+    # pull the objects' tops down (the target's graph), as lower bounds they cost nothing (the map's).
+    measured = np.array(problem.measurements)
+    measured[cut, 3] -= 0.05
+    censored = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
+    chained = tracklets_of_problem(censored)
+    target = AssociationTarget(censored, chained.tracklets, ClutterConfig(distractor_weight=0.0))
+    assert not target.problem.measurement_censored_top.any()
+    np.testing.assert_array_equal(target.estimation_problem.measurement_censored_top, cut)
+    state = initial_association(chained.tracklets, 0.6)
+    summary = target.summary(state)
+    groups = target.groups(state)
+    as_bounds = solve(target.estimation_problem, groups)
+    as_measured = target.solution(state)
+    heights = [o.size_m[1] for o in summary.objects]
+    np.testing.assert_allclose(heights, [o.size_m[1] for o in as_bounds.objects[: state.n_objects]], atol=1e-6)
+    assert np.all(np.abs(np.subtract(heights, [o.size_m[1] for o in as_measured.objects[: state.n_objects]])) > 1e-3)

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.outliers import WARM_START_CAP_SCALES, half_chi2, truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, GraphProblem
-from objslam_mapper.slice_model import BEARING, predict_reduced
+from objslam_mapper.slice_model import BEARING, ELEVATION_TOP, censor, predict_reduced
 
 # The object's 5 variables enter predict_reduced's 6 reduced columns (delta_x, delta_y,
 # theta, z_base, d, H) through these (location x, y as +delta).
@@ -58,6 +58,7 @@ class _ObjectSystem:
         self.poses = np.ascontiguousarray(poses[problem.measurement_pose[group]])
         self.z = np.ascontiguousarray(problem.measurements[group].T)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[group].T)
+        self.censored_top = problem.measurement_censored_top[group]
         self.outlier_cost = problem.measurement_outlier_cost[group]
         self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
         self.cap_scale = 1.0  # as AssociationSystem.cap_scale
@@ -76,10 +77,13 @@ class _ObjectSystem:
             return math.inf, None, None, len(self.z[0])
         res = pred.values - self.z
         res[BEARING] = wrap_angle(res[BEARING])
-        res *= self.inv_sigma
+        weight = self.inv_sigma
+        if self.censored_top.any():
+            weight = weight.copy()
+            weight[ELEVATION_TOP] *= censor(res, self.censored_top)
+        res *= weight
         half = half_chi2(res)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
-        weight = self.inv_sigma
         if self.has_outlier_model and self.cap_scale < np.inf:
             weight = weight * truncate(res, self.outlier_cost * self.cap_scale, half)
         jac = pred.jacobian[:, _OBJECT_COLUMNS] * weight[:, None, :]  # (4, 5, A)

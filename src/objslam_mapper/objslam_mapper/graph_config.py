@@ -115,6 +115,17 @@ class SliceNoiseConfig:
         "whose top hides the object's lowest part (the measured edge is then the support's rim)",
         minimum=1e-9,
     )
+    censor_view_top: bool = setting(
+        True,
+        "a slice of low confidence whose upper edge lies at the top of the camera's view was cut by it: "
+        "its upper edge is a lower bound on the object's, which costs only where the model's lies below it",
+    )
+    view_top_tolerance_rad: float = setting(
+        0.007,
+        "an upper edge this close to the highest one seen at its bearing is at the top of the view "
+        "(about 3 px at the bundled image's edge)",
+        minimum=0.0,
+    )
     low_confidence: float = setting(
         0.5,
         "slices with at most this confidence are likely cut short (the detector halves the confidence of a "

@@ -74,7 +74,7 @@ from objslam_mapper.normal_equations import (
 )
 from objslam_mapper.outliers import truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
-from objslam_mapper.slice_model import BEARING, predict_reduced
+from objslam_mapper.slice_model import BEARING, ELEVATION_TOP, censor, predict_reduced
 from objslam_mapper.solver import (
     GraphSolution,
     initial_calibration,
@@ -205,6 +205,7 @@ def _slice_factor(
     pose_keys = [GtsamKeys.pose(i) for i in pose_index]
     z = np.ascontiguousarray(problem.measurements[measurements].T)  # (4, A)
     inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[measurements].T)
+    censored_top = problem.measurement_censored_top[measurements]
     cap = problem.measurement_outlier_cost[measurements] * cap_scale
     capped = bool(np.isfinite(cap).any())
     mount = problem.mounts(measurements)
@@ -216,8 +217,10 @@ def _slice_factor(
         pred = predict_reduced(at, obj[:3], obj[3:], mount, jacobians=jacobians is not None)
         err = pred.values - z
         err[BEARING] = wrap_angle(err[BEARING])
-        err *= inv_sigma
-        weight = inv_sigma * truncate(err, cap) if capped else inv_sigma  # capped slices carry no information
+        sigma_weight = inv_sigma.copy()
+        sigma_weight[ELEVATION_TOP] *= censor(err, censored_top)  # upper edges cut by the view: lower bounds
+        err *= sigma_weight
+        weight = sigma_weight * truncate(err, cap) if capped else sigma_weight  # capped slices carry no information
         err[:, ~pred.valid] = _INVALID_RESIDUAL
         if jacobians is not None:
             jac = pred.jacobian * weight[:, None, :]  # (4, 6, A)

@@ -62,7 +62,7 @@ from objslam_mapper.outliers import (
     truncate,
 )
 from objslam_mapper.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
-from objslam_mapper.slice_model import BEARING, COMPONENTS, ReducedPrediction, predict_reduced
+from objslam_mapper.slice_model import BEARING, COMPONENTS, ELEVATION_TOP, ReducedPrediction, censor, predict_reduced
 
 _BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
 
@@ -219,6 +219,7 @@ def beyond_cap(
     res = pred.values - problem.measurements[layout.measurements].T
     res[BEARING] = wrap_angle(res[BEARING])
     res /= problem.measurement_stddev[layout.measurements].T
+    res[ELEVATION_TOP] *= censor(res, problem.measurement_censored_top[layout.measurements])
     return ~pred.valid | (half_chi2(res) > cap_scale * problem.measurement_outlier_cost[layout.measurements])
 
 
@@ -345,6 +346,7 @@ class AssociationSystem:
         self.n_calib = problem.calibration_dim
         self.z = np.ascontiguousarray(problem.measurements[layout.measurements].T)  # (4, A)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[layout.measurements].T)
+        self.censored_top = problem.measurement_censored_top[layout.measurements]
         self.outlier_cost = problem.measurement_outlier_cost[layout.measurements]
         self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
         self.cap_scale = 1.0  # the caps' multiplier (objslam_mapper.outliers; inf: every slice Gaussian)
@@ -449,28 +451,33 @@ class AssociationSystem:
         pose_calib[1:] += block
         return 0.5 * float(prior @ prior), grad, pose_calib, calib_diag
 
-    def _whitened_slices(self, poses: NDArray, objects: NDArray) -> tuple[ReducedPrediction, NDArray]:
-        """The slices' predictions and their whitened residuals (4, A), before any cap."""
+    def _whitened_slices(self, poses: NDArray, objects: NDArray) -> tuple[ReducedPrediction, NDArray, NDArray]:
+        """The slices' predictions, their whitened residuals (4, A) before any cap, and the
+        weights (4, A) that whiten their Jacobians (upper edges a lower bound, slice_model.censor)."""
         obj = objects[self.layout.object_of]
         pred = predict_reduced(poses[self.layout.pose_of], obj[:, :3], obj[:, 3:], self.mounts)
         sl = pred.values - self.z
         sl[BEARING] = wrap_angle(sl[BEARING])
-        sl *= self.inv_sigma
-        return pred, sl
+        weight = self.inv_sigma
+        if self.censored_top.any():
+            weight = weight.copy()
+            weight[ELEVATION_TOP] *= censor(sl, self.censored_top)
+        sl *= weight
+        return pred, sl, weight
 
     def linearize(self, poses: NDArray, objects: NDArray, calib: NDArray) -> Linearization:
         n, k = self.n_poses, self.n_objects
         lay = self.layout
-        pred, sl = self._whitened_slices(poses, objects)
+        pred, sl, weight = self._whitened_slices(poses, objects)
         if not np.all(pred.valid):
             return Linearization(cost=np.inf, valid=False)
         half = half_chi2(sl)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
         if self.has_outlier_model and self.cap_scale < np.inf:
             within = truncate(sl, self.outlier_cost * self.cap_scale, half)
-            jac = pred.jacobian * (self.inv_sigma * within)[:, None, :]  # (4, 6, A); capped slices carry no information
+            jac = pred.jacobian * (weight * within)[:, None, :]  # (4, 6, A); capped slices carry no information
         else:
-            jac = pred.jacobian * self.inv_sigma[:, None, :]
+            jac = pred.jacobian * weight[:, None, :]
         jac_pose = jac[:, :3] * _POSE_SIGN[None, :, None]  # (4, 3, A)
         jac_object = jac[:, _OBJECT_COLUMNS]  # (4, 5, A)
         odo_cost, diag_i, diag_j, pose_off, grad_pose, terms = self._odometry(poses, calib)
@@ -566,9 +573,9 @@ class AssociationSystem:
         """
         n, dim = self.n_poses, self.dimension
         lay = self.layout
-        pred, sl = self._whitened_slices(poses, objects)
+        pred, sl, weight = self._whitened_slices(poses, objects)
         kept = np.flatnonzero(self._within_caps(sl) if inliers is None else inliers)
-        jac = pred.jacobian[:, :, kept] * self.inv_sigma[:, None, kept]
+        jac = pred.jacobian[:, :, kept] * weight[:, None, kept]
         columns = np.concatenate(
             [
                 POSE_DIM * lay.pose_of[kept, None] + np.arange(POSE_DIM),

@@ -11,7 +11,11 @@ sampler (:func:`objslam_mapper.solver.solve`). It holds
   i.e. images by stamp, then slice order): ``measurements[m]`` = (bearing, angular width, elevation bottom,
   elevation top), its noise, the pose it was seen from, its class; ``measurement_image``
   and ``measurement_slot`` lead back to the input ``images[i].slices[k]``. Slices of
-  low confidence (likely cut short) get inflated noise; ``measurement_outlier_cost`` is
+  low confidence (likely cut short) get inflated noise; those of them whose upper edge
+  lies at the top of the camera's view (:func:`at_view_top`) were cut by the view, so
+  their upper edge is the view's, a lower bound on the object's
+  (``measurement_censored_top``, :func:`objslam_mapper.slice_model.censor`);
+  ``measurement_outlier_cost`` is
   where each slice's cost stops growing (:mod:`objslam_mapper.outliers`);
 - when ``odometry.calibration.enabled``, the zero-mean prior of the odometry calibration
   ``c = (distance_scale, turn_scale, turn_bias_rad_per_m)`` (one variable per map, see
@@ -49,7 +53,7 @@ from objslam_mapper.catalog import Catalog, ObjectClass
 from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
 from objslam_mapper.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.records import ImageSlices, OdometrySample
-from objslam_mapper.slice_model import ELEVATION_BOTTOM
+from objslam_mapper.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP
 from objslam_mapper.trajectory import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 
 if TYPE_CHECKING:
@@ -101,6 +105,7 @@ class GraphProblem:
     measurement_pose: NDArray[np.int64]
     measurement_label: NDArray[np.int64]
     measurement_confidence: NDArray[np.float64]
+    measurement_censored_top: NDArray[np.bool_]  # (M,) upper edge cut by the view: a lower bound (slice_model.censor)
     measurement_image: NDArray[np.int64]
     measurement_slot: NDArray[np.int64]
     # Prior rows (P >= L): row k < L is class k's prior
@@ -182,6 +187,32 @@ def class_measurement_stddev(cls: ObjectClass, noise: SliceNoiseConfig, mount: C
     return stddev
 
 
+# Bearing bins of the view's top: where the image's border cuts the view (the corners of a
+# square image, if they are not masked) its top varies with azimuth, by up to about 8 mrad per
+# degree on the bundled camera; within a 5 degree bin the upper edges of cut blobs pile up
+# near the bin's highest. A pile of at least this many tells the view's edge from one tall
+# object's top seen once.
+_VIEW_TOP_BINS = 72
+_VIEW_TOP_PILE = 3
+
+
+def at_view_top(measurements: NDArray[np.float64], tolerance_rad: float) -> NDArray[np.bool_]:
+    """(M,) whether each slice's upper edge lies at the top of the view: within
+    ``tolerance_rad`` of the highest upper edge at its bearing (of ``_VIEW_TOP_BINS``
+    bins), where at least ``_VIEW_TOP_PILE`` upper edges lie that close to their bins'
+    highest (in the bin and its two neighbours)."""
+    measurements = np.asarray(measurements, dtype=float).reshape(-1, 4)
+    top = measurements[:, ELEVATION_TOP]
+    bins = np.floor((measurements[:, BEARING] + np.pi) / (2.0 * np.pi) * _VIEW_TOP_BINS).astype(np.int64)
+    bins %= _VIEW_TOP_BINS
+    highest = np.full(_VIEW_TOP_BINS, -np.inf)
+    np.maximum.at(highest, bins, top)
+    near = top >= highest[bins] - tolerance_rad
+    count = np.bincount(bins[near], minlength=_VIEW_TOP_BINS)
+    pile = count + np.roll(count, 1) + np.roll(count, -1)  # a pile may straddle two bins
+    return near & (pile[bins] >= _VIEW_TOP_PILE)
+
+
 def build_problem(
     odometry: Sequence[OdometrySample],
     images: Sequence[ImageSlices],
@@ -234,7 +265,14 @@ def build_problem(
             slot_of.append(slot)
     if rejected_slices:
         logger.warning("%d slices of classes not in the catalog were left out", rejected_slices)
+    measurements = np.array(rows, dtype=float).reshape(-1, 4)
     meas_stddev = np.array(stddev, dtype=float).reshape(-1, 4)
+    censored = np.zeros(len(measurements), dtype=bool)
+    if config.slice_noise.censor_view_top:
+        low_confidence = np.array(confidence, dtype=float) <= config.slice_noise.low_confidence
+        censored = low_confidence & at_view_top(measurements, config.slice_noise.view_top_tolerance_rad)
+    if censored.any():
+        logger.info("%d slices reach the top of the view: their upper edges are lower bounds", int(censored.sum()))
     gaussian_norm = gaussian_log_normalizer(meas_stddev)
     noise = config.slice_noise
 
@@ -263,11 +301,12 @@ def build_problem(
         first_pose_stddev=read_only(first_stddev),
         increment_path_length_m=read_only(np.abs(np.diff(at.path_length_m))),
         calibration_prior_stddev=read_only(calib_stddev),
-        measurements=read_only(np.array(rows, dtype=float).reshape(-1, 4)),
+        measurements=read_only(measurements),
         measurement_stddev=read_only(meas_stddev),
         measurement_pose=read_only(np.array(pose_of, dtype=np.int64)),
         measurement_label=read_only(np.array(label_of, dtype=np.int64)),
         measurement_confidence=read_only(np.array(confidence, dtype=float)),
+        measurement_censored_top=read_only(censored),
         measurement_image=read_only(np.array(image_of, dtype=np.int64)),
         measurement_slot=read_only(np.array(slot_of, dtype=np.int64)),
         prior_mean=read_only(prior_mean.reshape(-1, OBJECT_DIM)),

@@ -205,6 +205,20 @@ def predict_slices(
     )
 
 
+def censor(error: NDArray[np.float64], censored_top: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """(A,) 1 where a slice's upper edge counts, 0 where it does not.
+
+    An upper edge cut by the top of the camera's view (``censored_top``) says only that the
+    object's reaches at least that high: a one-sided factor, the Gaussian's cost where the
+    model's upper edge lies below the measured one and none where it lies above (``error``
+    (4, A), predicted minus measured, in any units of the same sign). Multiplying the upper
+    edge's whitened residual and Jacobian row by this gives that factor's residual and its
+    (one-sided) Jacobian; the Gaussian normalizer stays, so an object does not gain by
+    reaching above the view.
+    """
+    return np.where(censored_top & (error[ELEVATION_TOP] > 0.0), 0.0, 1.0)
+
+
 def slice_error(predicted: ArrayLike, measured: ArrayLike) -> NDArray[np.float64]:
     """predicted - measured (M, 4), with the bearing difference wrapped."""
     error = np.atleast_2d(np.asarray(predicted, dtype=float) - np.asarray(measured, dtype=float)).copy()
