@@ -35,14 +35,15 @@ seen", at the MAP of ``J`` (:func:`sightings`):
   the object's base), which the detector does not see but which hides what is behind it.
   Without them, two objects of one class standing where one does (a duplicate) hid what is
   behind that place better than the narrower single object, in the images where the real
-  table hides it: the target preferred the duplicate by 13-21 nats on ``twins``.
+  table hides it: the target preferred the duplicate by 13-21 nats on ``twins`` (with
+  them the unscreened chain's best states with and without it are within a nat).
 
 Distractors pay their misses as objects do: otherwise clutter would be an escape from the
 term (an object split in two across a loop misses in the images of the other half; as a
 distractor it would not), and the chain would clear real objects into it. A flat poster
 is not seen from behind, which a cylinder is: such misses make independent false alarms
 (no misses) more attractive for it, which keeps it in clutter all the same. What the
-visibility test gets wrong (tables hiding objects, lighting) shows up as a
+visibility test gets wrong (lighting, a table's size, a thing half hidden) shows up as a
 few misses of real objects; at the default ``P_d = 0.7`` a miss costs 1.2 nats, a slice an
 object owns is worth about 20 to it, so a real object is never lost to them, while a ghost
 in view of hundreds of images without a detection pays hundreds of nats.
