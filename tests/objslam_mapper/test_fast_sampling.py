@@ -123,18 +123,20 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
 
 def _whitened_residuals(problem, poses, group, state):
     from objslam_mapper.geometry import wrap_angle
-    from objslam_mapper.slice_model import predict_reduced
+    from objslam_mapper.slice_model import censor, predict_reduced
 
     label = int(problem.measurement_label[group[0]])
     pred = predict_reduced(poses[problem.measurement_pose[group]], state[:3], state[3:], problem.mount, jacobians=False)
     res = pred.values - problem.measurements[group].T
     res[0] = wrap_angle(res[0])
     res = res / problem.measurement_stddev[group].T
+    res[3] *= censor(res, problem.measurement_censored_top[group])
     prior = (state - problem.prior_mean[label]) / problem.prior_stddev[label]
     return np.concatenate([res.ravel(), prior])
 
 
-def test_conditional_object_evidence_matches_finite_differences_and_the_full_map(office):
+@pytest.mark.parametrize("censored", [False, True], ids=["measured", "upper-edges-cut"])
+def test_conditional_object_evidence_matches_finite_differences_and_the_full_map(office, censored):
     import dataclasses
 
     from objslam_mapper.conditional_evidence import object_evidence
@@ -143,6 +145,15 @@ def test_conditional_object_evidence_matches_finite_differences_and_the_full_map
 
     run, problem = office
     groups = [g for g in run.groups(problem) if len(g) >= 5]
+    if censored:
+        # Every third slice's upper edge cut by the view, half of them 0.03 rad below the
+        # object's (free as lower bounds), half above (they cost).
+        cut = np.zeros(problem.measurement_count, dtype=bool)
+        cut[::3] = True
+        measured = np.array(problem.measurements)
+        measured[cut, 3] += np.where(np.arange(problem.measurement_count)[cut] % 2 == 0, -0.03, 0.03)
+        problem = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
+        assert cut[np.asarray(groups[0])].any()
     # Solved to the optimum (not just within the default cost tolerance): the comparison is at 1e-5 m.
     tight = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, absolute_tolerance=1e-10))
     full = solve(tight, groups)
