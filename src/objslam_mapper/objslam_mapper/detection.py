@@ -35,8 +35,8 @@ seen", at the MAP of ``J`` (:func:`sightings`):
   the object's base), which the detector does not see but which hides what is behind it.
   Without them, two objects of one class standing where one does (a duplicate) hid what is
   behind that place better than the narrower single object, in the images where the real
-  table hides it: the target preferred the duplicate by 13-21 nats on ``twins`` (with
-  them the unscreened chain's best states with and without it are within a nat).
+  table hides it: the target preferred the duplicate by 13-21 nats on ``twins``; with
+  them, the best states of unscreened chains with and without it score within a nat.
 
 Distractors pay their misses as objects do: otherwise clutter would be an escape from the
 term (an object split in two across a loop misses in the images of the other half; as a
