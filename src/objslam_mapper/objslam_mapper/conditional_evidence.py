@@ -27,10 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.outliers import WARM_START_CAP_SCALES, half_chi2, truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, GraphProblem
-from objslam_mapper.slice_model import BEARING, ELEVATION_TOP, censor, predict_reduced
+from objslam_mapper.slice_model import predict_reduced, whitened_slice_error
 
 # The object's 5 variables enter predict_reduced's 6 reduced columns (delta_x, delta_y,
 # theta, z_base, d, H) through these (location x, y as +delta).
@@ -75,13 +74,7 @@ class _ObjectSystem:
         pred = predict_reduced(self.poses, state[:3], state[3:], self.mount)
         if not np.all(pred.valid):
             return math.inf, None, None, len(self.z[0])
-        res = pred.values - self.z
-        res[BEARING] = wrap_angle(res[BEARING])
-        weight = self.inv_sigma
-        if self.censored_top.any():
-            weight = weight.copy()
-            weight[ELEVATION_TOP] *= censor(res, self.censored_top)
-        res *= weight
+        res, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.censored_top)
         half = half_chi2(res)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
         if self.has_outlier_model and self.cap_scale < np.inf:

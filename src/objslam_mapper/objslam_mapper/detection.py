@@ -191,7 +191,7 @@ def table_sight(
 # objects side by side), so their covers do not add up and the union is what counts. A
 # column of the grid is one 16-bit word (bit i: elevation point i covered).
 _COVER_GRID = 16
-_POPCOUNT = np.array([bin(v).count("1") for v in range(1 << _COVER_GRID)], dtype=np.int64)
+_POPCOUNT = np.unpackbits(np.arange(1 << _COVER_GRID, dtype=">u2").view(np.uint8)).reshape(-1, 16).sum(axis=1)
 
 
 def hidden(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:

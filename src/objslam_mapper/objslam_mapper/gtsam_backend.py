@@ -74,7 +74,7 @@ from objslam_mapper.normal_equations import (
 )
 from objslam_mapper.outliers import truncate
 from objslam_mapper.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
-from objslam_mapper.slice_model import BEARING, ELEVATION_TOP, censor, predict_reduced
+from objslam_mapper.slice_model import predict_reduced, whitened_slice_error
 from objslam_mapper.solver import (
     GraphSolution,
     initial_calibration,
@@ -215,11 +215,7 @@ def _slice_factor(
         at = _read_poses(values, pose_keys)[local]
         obj = values.atVector(object_key)
         pred = predict_reduced(at, obj[:3], obj[3:], mount, jacobians=jacobians is not None)
-        err = pred.values - z
-        err[BEARING] = wrap_angle(err[BEARING])
-        sigma_weight = inv_sigma.copy()
-        sigma_weight[ELEVATION_TOP] *= censor(err, censored_top)  # upper edges cut by the view: lower bounds
-        err *= sigma_weight
+        err, sigma_weight = whitened_slice_error(pred.values, z, inv_sigma, censored_top)
         weight = sigma_weight * truncate(err, cap) if capped else sigma_weight  # capped slices carry no information
         err[:, ~pred.valid] = _INVALID_RESIDUAL
         if jacobians is not None:

@@ -62,7 +62,7 @@ from objslam_mapper.outliers import (
     truncate,
 )
 from objslam_mapper.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
-from objslam_mapper.slice_model import BEARING, COMPONENTS, ELEVATION_TOP, ReducedPrediction, censor, predict_reduced
+from objslam_mapper.slice_model import COMPONENTS, ReducedPrediction, predict_reduced, whitened_slice_error
 
 _BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
 
@@ -216,10 +216,12 @@ def beyond_cap(
     obj = objects[layout.object_of]
     mounts = problem.mounts(layout.measurements)
     pred = predict_reduced(poses[layout.pose_of], obj[:, :3], obj[:, 3:], mounts, jacobians=False)
-    res = pred.values - problem.measurements[layout.measurements].T
-    res[BEARING] = wrap_angle(res[BEARING])
-    res /= problem.measurement_stddev[layout.measurements].T
-    res[ELEVATION_TOP] *= censor(res, problem.measurement_censored_top[layout.measurements])
+    res, _ = whitened_slice_error(
+        pred.values,
+        problem.measurements[layout.measurements].T,
+        1.0 / problem.measurement_stddev[layout.measurements].T,
+        problem.measurement_censored_top[layout.measurements],
+    )
     return ~pred.valid | (half_chi2(res) > cap_scale * problem.measurement_outlier_cost[layout.measurements])
 
 
@@ -456,13 +458,7 @@ class AssociationSystem:
         weights (4, A) that whiten their Jacobians (upper edges a lower bound, slice_model.censor)."""
         obj = objects[self.layout.object_of]
         pred = predict_reduced(poses[self.layout.pose_of], obj[:, :3], obj[:, 3:], self.mounts)
-        sl = pred.values - self.z
-        sl[BEARING] = wrap_angle(sl[BEARING])
-        weight = self.inv_sigma
-        if self.censored_top.any():
-            weight = weight.copy()
-            weight[ELEVATION_TOP] *= censor(sl, self.censored_top)
-        sl *= weight
+        sl, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.censored_top)
         return pred, sl, weight
 
     def linearize(self, poses: NDArray, objects: NDArray, calib: NDArray) -> Linearization:

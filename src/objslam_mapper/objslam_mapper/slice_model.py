@@ -219,6 +219,24 @@ def censor(error: NDArray[np.float64], censored_top: NDArray[np.bool_]) -> NDArr
     return np.where(censored_top & (error[ELEVATION_TOP] > 0.0), 0.0, 1.0)
 
 
+def whitened_slice_error(
+    predicted: NDArray[np.float64],
+    measured: NDArray[np.float64],
+    inv_sigma: NDArray[np.float64],
+    censored_top: NDArray[np.bool_],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Whitened residuals (4, A) of component-major slices, bearing wrapped, and the weights
+    (4, A) that whiten their Jacobians: ``inv_sigma``, with the upper edge of each
+    ``censored_top`` slice zeroed where the model clears its bound (:func:`censor`)."""
+    error = predicted - measured
+    error[BEARING] = wrap_angle(error[BEARING])
+    weight = inv_sigma
+    if censored_top.any():
+        weight = inv_sigma.copy()
+        weight[ELEVATION_TOP] *= censor(error, censored_top)
+    return error * weight, weight
+
+
 def slice_error(predicted: ArrayLike, measured: ArrayLike) -> NDArray[np.float64]:
     """predicted - measured (M, 4), with the bearing difference wrapped."""
     error = np.atleast_2d(np.asarray(predicted, dtype=float) - np.asarray(measured, dtype=float)).copy()
