@@ -4,9 +4,9 @@ Usage: python scripts/aligned_covariance.py BAG [--params FILE]
 
 `objslam eval` aligns the map to the ground truth by a least-squares SE(2) fit of the
 trajectory before it measures object errors; a map's covariances are about the trajectory
-(objslam_mapper.gauge) for that reason, where the graph's plain marginals are anchored at
+(objslam_mapper.graph.gauge) for that reason, where the graph's plain marginals are anchored at
 its first pose. This script works with the posterior (the configured noise; a map reports
-the covariance of the estimate's error instead, objslam_mapper.error_covariance): it solves
+the covariance of the estimate's error instead, objslam_mapper.graph.error_covariance): it solves
 the ground-truth association of BAG once,
 takes the joint covariance of all poses and objects from the solver's (sparse) normal
 equations, and propagates it through the linearized trajectory fit: the covariance of
@@ -24,14 +24,14 @@ import argparse
 import dataclasses
 
 import numpy as np
+from objslam_common.catalog import load_catalog
+from objslam_common.config import default_config_dir, load_config
 from scipy.stats import chi2
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.config import default_config_dir, load_config
-from objslam_mapper.gauge import object_motion, trajectory_gauge
-from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.graph.gauge import object_motion, trajectory_gauge
+from objslam_mapper.graph.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.graph.solver import solve
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.solver import solve
 from objslam_tools.evaluate import align_track, nees_summary
 from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.trajectory import PoseTrack
@@ -51,7 +51,7 @@ def joint_covariance(problem, groups, solution) -> np.ndarray:
 def alignment_jacobian(track_xy: np.ndarray, point_xy: np.ndarray, n_variables: int, column: int) -> np.ndarray:
     """(2, n) map from the state error to a point's error after the trajectory fit (linearized).
 
-    The package's own gauge (objslam_mapper.gauge), written out over the whole state:
+    The package's own gauge (objslam_mapper.graph.gauge), written out over the whole state:
     the point's error less the rigid motion fitted to the pose errors, ``E - M G``.
     """
     gauge = trajectory_gauge(track_xy)

@@ -10,7 +10,7 @@ estimate's error is ``-Λ⁻¹ (Σ_k J_kᵀ r_k + P (x_true - μ))``: each noise
 the truth ``r_k`` and each prior's offset of the truth from its mean add their own part.
 Slice groups are split into each object's mean error (its bias) and the rest (white or
 serially correlated). The objects' errors are taken about the trajectory, as the map's
-covariances are (objslam_mapper.gauge). Printed: per object the real error beside the
+covariances are (objslam_mapper.graph.gauge). Printed: per object the real error beside the
 sum of the parts (the linearization's check), the map's error covariance against the
 real base-height error, and per part the root mean square over the objects of the xy
 and z errors it makes, beside what the map's error covariance expects of it; last, the
@@ -28,16 +28,16 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+from objslam_common.catalog import load_catalog
+from objslam_common.config import default_config_dir, load_config
+from objslam_common.geometry import inverse, transform_points, wrap_angle
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.config import default_config_dir, load_config
-from objslam_mapper.error_covariance import _owner_rows
-from objslam_mapper.gauge import GAUGE_DIM, object_motion, trajectory_gauge
-from objslam_mapper.geometry import inverse, transform_points, wrap_angle
-from objslam_mapper.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.graph.error_covariance import _owner_rows
+from objslam_mapper.graph.gauge import GAUGE_DIM, object_motion, trajectory_gauge
+from objslam_mapper.graph.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.graph.problem import GraphProblem
+from objslam_mapper.graph.solver import GraphSolution, solve
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.problem import GraphProblem
-from objslam_mapper.solver import GraphSolution, solve
 from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.sim.motion import OdometryNoise
 from objslam_tools.trajectory import fit_se2, transform_poses
@@ -132,7 +132,7 @@ def error_budget(
     if len(calib):
         offsets[-len(calib) :] = true_calib / problem.calibration_prior_stddev**2
     # Each prior's information scaled to the spread of the truth about its mean, as the map's
-    # error covariance counts it (objslam_mapper.error_covariance).
+    # error covariance counts it (objslam_mapper.graph.error_covariance).
     counted = np.diag(priors) * system.prior_scale() ** 2
     calibration_columns = np.arange(split + OBJECT_DIM * k, system.dimension)
     for name, index in (

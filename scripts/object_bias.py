@@ -8,7 +8,7 @@ ground truth (ground-truth pose and object), whitened by the slice's configured 
 The mean of one object's whitened errors is its bias (hundreds of slices average the white
 noise away; their standard deviation is printed beside it); printed per object with the
 mean over the bag's objects (a bias all of them share), then the root mean square over
-the objects of all BAGs per component: the bias share of objslam_mapper.error_covariance
+the objects of all BAGs per component: the bias share of objslam_mapper.graph.error_covariance
 (the stddev of an error common to all slices of an object, in units of the slices'
 configured stddev). A measurement of the detector, not part of the package.
 """
@@ -18,12 +18,12 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from objslam_common.catalog import load_catalog
+from objslam_common.config import default_config_dir, load_config
+from objslam_common.geometry import wrap_angle
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.config import default_config_dir, load_config
-from objslam_mapper.geometry import wrap_angle
+from objslam_mapper.model.slice_model import BEARING, COMPONENTS, ELEVATION_TOP, censor, predict_reduced
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.slice_model import BEARING, COMPONENTS, ELEVATION_TOP, censor, predict_reduced
 from objslam_tools.oracle_map import oracle_problem
 
 

@@ -53,7 +53,7 @@ fi
 #    at src/ so that edits take effect without a rebuild (the colcon install uses
 #    symlinks for the same reason).
 SITE="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
-printf '%s\n' "$ROOT/src/objslam_mapper" "$ROOT/src/objslam_detector" "$ROOT/src/objslam_tools" \
+printf '%s\n' "$ROOT/src/objslam_common" "$ROOT/src/objslam_mapper" "$ROOT/src/objslam_detector" "$ROOT/src/objslam_tools" \
   > "$SITE/objslam_src.pth"
 cat > "$VENV/bin/objslam" <<EOS
 #!$VENV/bin/python

@@ -16,5 +16,5 @@ setup(
     maintainer_email="maintainers@objslam.dev",
     description="Colour-blob detector: omnidirectional images to slice measurements.",
     license="BSD-3-Clause",
-    entry_points={"console_scripts": ["detector = objslam_detector.node:main"]},
+    entry_points={"console_scripts": ["detector = objslam_detector.ros.node:main"]},
 )

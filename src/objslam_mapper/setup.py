@@ -1,5 +1,3 @@
-from glob import glob
-
 from setuptools import find_packages, setup
 
 package_name = "objslam_mapper"
@@ -11,7 +9,6 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
-        (f"share/{package_name}/config", glob("../../config/*.yaml")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -19,5 +16,5 @@ setup(
     maintainer_email="maintainers@objslam.dev",
     description="ROS-free core of objslam (model, factor graph, association, map building) and the mapper node.",
     license="BSD-3-Clause",
-    entry_points={"console_scripts": ["mapper = objslam_mapper.node:main"]},
+    entry_points={"console_scripts": ["mapper = objslam_mapper.ros.node:main"]},
 )

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from objslam_common.catalog import load_catalog
+from objslam_common.config import ConfigError, from_mapping
 
 from objslam_detector import ColorConfig, DetectorConfig
 from objslam_detector.colors import classify, derive_gates, hue_distance_deg, lookup_tables, parse_class_overrides
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.config import ConfigError, from_mapping
 
 CATALOG = load_catalog()
 

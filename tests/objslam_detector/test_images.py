@@ -5,10 +5,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from objslam_common.camera import DEFAULT_CAMERA
 
 from objslam_detector import Detector, DetectorInputError, decode_compressed, image_from_buffer
 from objslam_detector.errors import CORRUPT_COMPRESSED, EMPTY_IMAGE, SIZE_MISMATCH, UNSUPPORTED_ENCODING
-from objslam_mapper.camera import DEFAULT_CAMERA
 from tests.objslam_detector.conftest import place, render, scene_of
 
 DETECTOR = Detector()

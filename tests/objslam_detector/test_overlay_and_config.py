@@ -6,10 +6,10 @@ import dataclasses
 import math
 
 import numpy as np
+from objslam_common.camera import DEFAULT_CAMERA
+from objslam_common.config import default_config_dir, flatten, load_config
 
 from objslam_detector import DetectedSlice, Detector, DetectorConfig, draw_slices
-from objslam_mapper.camera import DEFAULT_CAMERA
-from objslam_mapper.config import default_config_dir, flatten, load_config
 from tests.objslam_detector.conftest import place, render, scene_of
 
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import wrap_angle
+from objslam_common.records import ImageSlices, SliceMeasurement
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.problem import GraphProblem, build_problem
-from objslam_mapper.records import ImageSlices, SliceMeasurement
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.problem import GraphProblem, build_problem
 from objslam_mapper.synthetic import SyntheticObject, SyntheticRun, simulate_run
 
 RED_A = SyntheticObject("red", (1.5, 1.2, 0.0), (0.30, 0.60))

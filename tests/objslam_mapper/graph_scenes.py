@@ -5,11 +5,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import rotation, transform_points
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import rotation, transform_points
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.solver import GraphSolution, ObjectEstimate
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.solver import GraphSolution, ObjectEstimate
 from objslam_mapper.synthetic import SyntheticObject, SyntheticRun
 from objslam_tools.trajectory import fit_se2
 

@@ -1,11 +1,12 @@
-"""objslam_mapper.baselines: fixed associations mapped by the same factor graph."""
+"""objslam_mapper.inference.baselines: fixed associations mapped by the same factor graph."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from objslam_common.catalog import load_catalog
 
-from objslam_mapper.baselines import (
+from objslam_mapper.inference.baselines import (
     BaselineError,
     GreedyOptions,
     build_baseline_map,
@@ -13,10 +14,9 @@ from objslam_mapper.baselines import (
     map_of_association,
     no_association,
 )
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.inference import SamplerConfig
+from objslam_mapper.inference.infer import SamplerConfig
+from objslam_mapper.inference.tracklets import tracklets_of_problem
 from objslam_mapper.synthetic import SyntheticObject
-from objslam_mapper.tracklets import tracklets_of_problem
 from tests.objslam_mapper.association_scenes import GREEN, POSTER_FRAMES, RED_A, problem_of, simulate, with_poster
 
 # Two metres from RED_A along the drive, so both are seen on the way out.

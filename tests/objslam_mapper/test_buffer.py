@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
-from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 
 SLICE = SliceMeasurement("red", 1.0, 0.1, 0.05, -0.2, 0.1)
 

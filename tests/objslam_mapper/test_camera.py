@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
-from objslam_mapper.camera import DEFAULT_CAMERA, CameraModelError, CameraMount, UnifiedCamera
+from objslam_common.camera import DEFAULT_CAMERA, CameraModelError, CameraMount, UnifiedCamera
 
 
 @st.composite

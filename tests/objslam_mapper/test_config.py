@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import pytest
-
-from objslam_mapper.config import ConfigError, flatten, from_mapping, load_config, setting, unflatten
+from objslam_common.config import ConfigError, flatten, from_mapping, load_config, setting, unflatten
 
 
 @dataclass(frozen=True)

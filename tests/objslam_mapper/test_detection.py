@@ -1,4 +1,4 @@
-"""Missed detections (objslam_mapper.detection): what is in view, and what a miss costs."""
+"""Missed detections (objslam_mapper.inference.detection): what is in view, and what a miss costs."""
 
 from __future__ import annotations
 
@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from objslam_common.camera import CameraMount
+from objslam_common.catalog import load_catalog
 
-from objslam_mapper.camera import CameraMount
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.detection import (
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.inference.detection import (
     DetectionConfig,
     Sight,
     detection_log_likelihood,
@@ -22,8 +24,6 @@ from objslam_mapper.detection import (
     view_top_elevation,
     visible,
 )
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.problem import build_problem
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
 CONFIG = DetectionConfig()

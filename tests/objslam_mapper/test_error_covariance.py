@@ -1,4 +1,4 @@
-"""Covariance of the estimate's error (objslam_mapper.error_covariance): the algebra against
+"""Covariance of the estimate's error (objslam_mapper.graph.error_covariance): the algebra against
 Monte Carlo on linear problems, the solver's rows against its information, and the pipeline's
 consistency where the posterior is pessimistic."""
 
@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from objslam_mapper.error_covariance import (
+from objslam_mapper.config import ErrorCovarianceConfig, GraphConfig
+from objslam_mapper.graph.error_covariance import (
     ErrorCovarianceError,
     NoiseGroup,
     bias_shares,
@@ -21,10 +22,9 @@ from objslam_mapper.error_covariance import (
     row_leverages,
     white_weights,
 )
-from objslam_mapper.graph_config import ErrorCovarianceConfig, GraphConfig
-from objslam_mapper.normal_equations import AssociationSystem, cap_schedule, layout_of
-from objslam_mapper.problem import OBJECT_DIM, POSE_DIM, build_problem
-from objslam_mapper.solver import solve
+from objslam_mapper.graph.normal_equations import AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, build_problem
+from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, simulate_run
 
 from .graph_scenes import CATALOG, CONFIG, MOUNT, STEP_NS, draw_scene, object_nees

@@ -1,4 +1,4 @@
-"""Objects are solid (objslam_mapper.exclusion): the no-overlap term and what it does to the target."""
+"""Objects are solid (objslam_mapper.inference.exclusion): the no-overlap term and what it does to the target."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
-from objslam_mapper.association import Association
-from objslam_mapper.clutter import ClutterConfig
-from objslam_mapper.exclusion import near_pairs, no_overlap_log_probability, pairs_log_probability
-from objslam_mapper.inference import AssociationTarget
-from objslam_mapper.solver import solve
-from objslam_mapper.tracklets import tracklets_of_problem
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.inference.association import Association
+from objslam_mapper.inference.clutter import ClutterConfig
+from objslam_mapper.inference.exclusion import near_pairs, no_overlap_log_probability, pairs_log_probability
+from objslam_mapper.inference.infer import AssociationTarget
+from objslam_mapper.inference.tracklets import tracklets_of_problem
 
 from .association_scenes import problem_of, simulate
 

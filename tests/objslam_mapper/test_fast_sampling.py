@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from objslam_common.catalog import load_catalog
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.inference import NO_OBJECT_LOG_EVIDENCE
-from objslam_mapper.problem import build_problem
-from objslam_mapper.solver import solve
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.inference.infer import NO_OBJECT_LOG_EVIDENCE
 from objslam_mapper.synthetic import office_run
 
 CATALOG = load_catalog()
@@ -58,8 +58,8 @@ def _state_noise(state, other, scale):
     ids=["exact-screen", "poor-screen", "poor-screen-with-margins-and-floor", "bad-screen-with-a-join-floor"],
 )
 def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_error, margins):
-    from objslam_mapper.association import CLUTTER, Association, enumerate_associations
-    from objslam_mapper.sampler import ExactDistribution, MetropolisHastings
+    from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
+    from objslam_mapper.inference.sampler import ExactDistribution, MetropolisHastings
 
     from .test_sampler import random_problem
 
@@ -93,8 +93,8 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
 @pytest.mark.slow
 def test_a_screen_that_ignores_the_reverse_stage_is_caught():
     """Power check: accepting on the screen alone (no second-stage correction) is visibly wrong."""
-    from objslam_mapper.association import CLUTTER, Association
-    from objslam_mapper.sampler import ExactDistribution, MetropolisHastings
+    from objslam_mapper.inference.association import CLUTTER, Association
+    from objslam_mapper.inference.sampler import ExactDistribution, MetropolisHastings
 
     from .test_sampler import random_problem
 
@@ -122,8 +122,9 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
 
 
 def _whitened_residuals(problem, poses, group, state):
-    from objslam_mapper.geometry import wrap_angle
-    from objslam_mapper.slice_model import censor, predict_reduced
+    from objslam_common.geometry import wrap_angle
+
+    from objslam_mapper.model.slice_model import censor, predict_reduced
 
     label = int(problem.measurement_label[group[0]])
     pred = predict_reduced(poses[problem.measurement_pose[group]], state[:3], state[3:], problem.mount, jacobians=False)
@@ -139,9 +140,9 @@ def _whitened_residuals(problem, poses, group, state):
 def test_conditional_object_evidence_matches_finite_differences_and_the_full_map(office, censored):
     import dataclasses
 
-    from objslam_mapper.conditional_evidence import object_evidence
-    from objslam_mapper.initialization import initial_object
-    from objslam_mapper.problem import LOG_2PI
+    from objslam_mapper.graph.conditional_evidence import object_evidence
+    from objslam_mapper.graph.initialization import initial_object
+    from objslam_mapper.graph.problem import LOG_2PI
 
     run, problem = office
     groups = [g for g in run.groups(problem) if len(g) >= 5]

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from objslam_mapper.gauge import about_trajectory, object_motion, trajectory_gauge
+from objslam_mapper.graph.gauge import about_trajectory, object_motion, trajectory_gauge
 from objslam_tools.trajectory import fit_se2
 
 _coordinate = st.floats(-5.0, 5.0)

@@ -12,17 +12,17 @@ import math
 import gtsam
 import numpy as np
 import pytest
+from objslam_common.geometry import between, wrap_angle
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
-from objslam_mapper.geometry import between, wrap_angle
-from objslam_mapper.graph_config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
-from objslam_mapper.gtsam_backend import build_gtsam_graph
-from objslam_mapper.initialization import initial_object
-from objslam_mapper.problem import GraphError, at_view_top, build_problem, with_extra_priors
-from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
-from objslam_mapper.slice_model import predict_slices, slice_error
-from objslam_mapper.solver import solve
+from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
+from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
+from objslam_mapper.graph.initialization import initial_object
+from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, with_extra_priors
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.model.slice_model import predict_slices, slice_error
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
 from .graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
@@ -82,7 +82,7 @@ def whitened_residuals(problem, groups, theta):
 
 def log_normalizers(problem, groups):
     """Sum of -1/2 log|2 pi Sigma| over every factor, from the noise standard deviations,
-    plus each slice's inlier weight log(1 - outlier probability) (objslam_mapper.outliers)."""
+    plus each slice's inlier weight log(1 - outlier probability) (objslam_mapper.model.outliers)."""
     sigmas = [problem.increment_stddev.ravel(), problem.first_pose_stddev, problem.calibration_prior_stddev]
     for group in groups:
         group = np.asarray(group)
@@ -366,7 +366,7 @@ def test_laplace_evidence_matches_an_independent_dense_computation(dense_object_
     assert solution.log_det_information == pytest.approx(log_det, abs=1e-4)
     assert solution.log_evidence == pytest.approx(expected, abs=1e-4)
     # Covariances are those of each object's error less the rigid motion fitted to the
-    # trajectory's (objslam_mapper.gauge), from the inverse information: (E - M G) Lambda^-1 (E - M G)^T.
+    # trajectory's (objslam_mapper.graph.gauge), from the inverse information: (E - M G) Lambda^-1 (E - M G)^T.
     cov = np.linalg.inv(info)
     n = 3 * problem.pose_count
     xy = solution.map_T_base[:, :2]
@@ -479,7 +479,7 @@ def test_evidence_prefers_the_true_number_of_objects():
     assert separate.log_evidence > glued.log_evidence + 100
 
 
-# -- the same problem in GTSAM (objslam_mapper.gtsam_backend; more in test_gtsam_backend.py) ---------
+# -- the same problem in GTSAM (objslam_mapper.graph.gtsam_backend; more in test_gtsam_backend.py) ---------
 
 
 @SOLVERS

@@ -14,13 +14,14 @@ import math
 import gtsam
 import numpy as np
 import pytest
+from objslam_common.catalog import load_catalog
+from objslam_common.config import ConfigError, from_mapping
+from objslam_common.records import ImageSlices
 
-from objslam_mapper import gtsam_backend
-from objslam_mapper.backends import solve_with_backend
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.config import ConfigError, from_mapping
-from objslam_mapper.graph_config import GraphConfig, KeyframeConfig, SolverConfig, load_graph_config
-from objslam_mapper.gtsam_backend import (
+from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig, load_graph_config
+from objslam_mapper.graph import gtsam_backend
+from objslam_mapper.graph.backends import solve_with_backend
+from objslam_mapper.graph.gtsam_backend import (
     GtsamBackendError,
     _damped,
     _Linearizer,
@@ -28,10 +29,9 @@ from objslam_mapper.gtsam_backend import (
     solve_gtsam,
     time_naive_solves,
 )
-from objslam_mapper.problem import build_problem
-from objslam_mapper.records import ImageSlices
-from objslam_mapper.slice_model import predict_slices
-from objslam_mapper.solver import solve
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.model.slice_model import predict_slices
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
 CATALOG = load_catalog()
@@ -107,7 +107,7 @@ def test_same_map_evidence_and_marginals_as_the_fast_solver(reference, drive, pe
 
 @pytest.mark.parametrize("per_detection", [True, False], ids=["per-detection", "per-group"])
 def test_a_keyframe_graph_solves_to_the_same_numbers(per_detection):
-    """Images between keyframes (objslam_mapper.keyframes): both backends solve the same graph."""
+    """Images between keyframes (objslam_mapper.graph.keyframes): both backends solve the same graph."""
     sparse = KeyframeConfig(min_travel_m=2.5, min_turn_rad=10.0)  # about 1 m per image: every third
     config = dataclasses.replace(TIGHT, solver=dataclasses.replace(TIGHT.solver, keyframes=sparse))
     problem, groups = make_problem(8, config=config)

@@ -6,13 +6,14 @@ import dataclasses
 
 import numpy as np
 import pytest
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import between, wrap_angle
 
-from objslam_mapper.association import CLUTTER, Association, enumerate_associations
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.clutter import DISTRACTOR, INDEPENDENT, ClutterConfig, ClutterModel
-from objslam_mapper.detection import DetectionConfig, sightings
-from objslam_mapper.geometry import between, wrap_angle
-from objslam_mapper.inference import (
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
+from objslam_mapper.inference.clutter import DISTRACTOR, INDEPENDENT, ClutterConfig, ClutterModel
+from objslam_mapper.inference.detection import DetectionConfig, sightings
+from objslam_mapper.inference.infer import (
     NO_OBJECT_LOG_EVIDENCE,
     AssociationTarget,
     SamplerConfig,
@@ -22,10 +23,9 @@ from objslam_mapper.inference import (
     initial_association,
     recall_start_clutter,
 )
-from objslam_mapper.sampler import ExactDistribution, MetropolisHastings, MoveConfig
-from objslam_mapper.solver import solve
+from objslam_mapper.inference.sampler import ExactDistribution, MetropolisHastings, MoveConfig
+from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
 from objslam_mapper.synthetic import SyntheticObject
-from objslam_mapper.tracklets import Tracklet, tracklets_of_problem
 
 from .association_scenes import GREEN, POSTER_FRAMES, RED_A, RED_B, problem_of, simulate, with_poster
 
@@ -130,7 +130,7 @@ def test_a_distractor_explains_a_floating_poster_far_better_than_its_class():
     poster = [m for m in poster if problem.measurement_slot[m] == len(run.images[problem.measurement_image[m]].slices)]
     assert len(poster) == len(POSTER_FRAMES)
     distractor = ClutterModel(problem, ClutterConfig()).distractor_log_evidence(poster)
-    # Its class explains the poster's slices only as outliers (objslam_mapper.outliers).
+    # Its class explains the poster's slices only as outliers (objslam_mapper.model.outliers).
     assert distractor > solve(problem, [poster]).log_evidence + 40.0
 
 

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from objslam_common.camera import CameraMount, CameraMounts
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import compose
 
-from objslam_mapper.camera import CameraMount, CameraMounts
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import compose
-from objslam_mapper.graph_config import GraphConfig, KeyframeConfig, SolverConfig
-from objslam_mapper.keyframes import offset_slice_variance, select_keyframes
-from objslam_mapper.problem import build_problem, gaussian_log_normalizer
-from objslam_mapper.slice_model import predict_reduced
-from objslam_mapper.solver import solve
+from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig
+from objslam_mapper.graph.keyframes import offset_slice_variance, select_keyframes
+from objslam_mapper.graph.problem import build_problem, gaussian_log_normalizer
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.model.odometry import increment_stddev
+from objslam_mapper.model.slice_model import predict_reduced
 from objslam_mapper.synthetic import ellipse_trajectory, office_scene, simulate_run
-from objslam_mapper.trajectory import increment_stddev
 
 CATALOG = load_catalog()
 KEYFRAMES = KeyframeConfig(min_travel_m=0.05, min_turn_rad=0.05)

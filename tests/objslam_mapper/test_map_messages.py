@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 
 import pytest
+from objslam_common.catalog import load_catalog
 from visualization_msgs.msg import Marker
 
-from objslam_mapper.catalog import load_catalog
 from objslam_mapper.map_file import BuiltMap, MappedObject, TrajectoryPose
 from objslam_mapper.ros.map_messages import time_from_ns, to_marker_array, to_object_map, to_path
 

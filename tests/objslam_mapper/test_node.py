@@ -190,9 +190,9 @@ DRIVER = textwrap.dedent(
     from visualization_msgs.msg import MarkerArray
     from objslam_msgs.msg import BuildProgress, ObjectMap, Slice, SliceArray
     from objslam_msgs.srv import BuildMap
-    from objslam_mapper.catalog import load_catalog
-    from objslam_mapper.geometry import quaternion_from_yaw
-    from objslam_mapper.records import SliceMeasurement
+    from objslam_common.catalog import load_catalog
+    from objslam_common.geometry import quaternion_from_yaw
+    from objslam_common.records import SliceMeasurement
     from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
     rclpy.init()

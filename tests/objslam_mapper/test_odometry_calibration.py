@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import between, wrap_angle
 from scipy.stats import chi2
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import between, wrap_angle
-from objslam_mapper.graph_config import GraphConfig, OdometryCalibrationConfig
-from objslam_mapper.normal_equations import AssociationSystem, layout_of
-from objslam_mapper.problem import build_problem
-from objslam_mapper.solver import solve
+from objslam_mapper.config import GraphConfig, OdometryCalibrationConfig
+from objslam_mapper.graph.normal_equations import AssociationSystem, layout_of
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, office_scene, simulate_run
 
 CATALOG = load_catalog()
@@ -193,7 +193,7 @@ def test_switched_off_the_graph_has_no_calibration_variable():
 # before the calibration existed (commit 732468c): (log evidence, chi2, log|Lambda|, iterations,
 # x of the last pose, var x of the first object). Bit-identical on the machine that made them;
 # the tolerance only leaves room for another BLAS. The variance is the first-pose-anchored
-# marginal of then: reported covariances are now about the trajectory (objslam_mapper.gauge).
+# marginal of then: reported covariances are now about the trajectory (objslam_mapper.graph.gauge).
 BEFORE_CALIBRATION = {
     40: (5483.240755505172, 1877.640183351579, 2608.457801002481, 6, -2.979882043802778, 0.00013259660126879443),
     0: (5483.240755505172, 1877.6401833515815, 2608.4578010024807, 6, -2.9798820438027787, 0.00013259660126879762),
@@ -205,7 +205,7 @@ def test_switched_off_the_solution_is_the_one_before_calibration_existed(dense_o
     from objslam_mapper.synthetic import office_run
 
     run = office_run(0, n_poses=60)
-    # The outlier model (objslam_mapper.outliers) came later too: off, every slice is Gaussian.
+    # The outlier model (objslam_mapper.model.outliers) came later too: off, every slice is Gaussian.
     config = dataclasses.replace(
         OFF,
         solver=dataclasses.replace(OFF.solver, dense_object_limit=dense_object_limit),

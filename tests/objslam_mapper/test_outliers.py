@@ -1,4 +1,4 @@
-"""The max-mixture slice likelihood (objslam_mapper.outliers) and what it does to a solve."""
+"""The max-mixture slice likelihood (objslam_mapper.model.outliers) and what it does to a solve."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from objslam_common.catalog import load_catalog
+from objslam_common.records import ImageSlices
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.outliers import half_chi2, inlier_log_weight, outlier_cost, truncate
-from objslam_mapper.problem import build_problem, gaussian_log_normalizer
-from objslam_mapper.records import ImageSlices
-from objslam_mapper.solver import solve
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.problem import build_problem, gaussian_log_normalizer
+from objslam_mapper.graph.solver import solve
+from objslam_mapper.model.outliers import half_chi2, inlier_log_weight, outlier_cost, truncate
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
 CATALOG = load_catalog()
@@ -110,7 +110,7 @@ def test_merged_blobs_become_outliers_and_leave_the_object_where_it_is():
     assert np.abs(gaussian_red - reference).max() > 0.01  # the merged blobs drag a Gaussian fit aside
     np.testing.assert_allclose(robust_red, reference, atol=1e-3)
     # Exactly the corrupted slices are beyond their cap at the MAP: cost tau each, no information.
-    from objslam_mapper.normal_equations import count_outliers, layout_of
+    from objslam_mapper.graph.normal_equations import count_outliers, layout_of
 
     layout = layout_of(robust, groups)
     objects = np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
@@ -125,7 +125,7 @@ def test_a_cold_solve_from_drifted_odometry_still_fits_every_slice():
     run = simulate_run(poses, stamps, SCENE, CATALOG, np.random.default_rng(6), config=CONFIG, odometry_noise_scale=3.0)
     problem = build_problem(run.odometry, run.images, CONFIG.camera_mount.to_mount(), CATALOG, CONFIG)
     groups = run.groups(problem)
-    from objslam_mapper.normal_equations import count_outliers, layout_of
+    from objslam_mapper.graph.normal_equations import count_outliers, layout_of
 
     layout = layout_of(problem, groups)
     starts = np.array([np.r_[o.location_m, o.size_m] for o in SCENE])

@@ -6,10 +6,9 @@ from dataclasses import dataclass
 
 import pytest
 import rclpy
+from objslam_common.config import ConfigError, setting
+from objslam_common.ros.params import declare_config
 from rclpy.parameter import Parameter
-
-from objslam_mapper.config import ConfigError, setting
-from objslam_mapper.ros.params import declare_config
 
 
 @dataclass(frozen=True)

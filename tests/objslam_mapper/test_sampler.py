@@ -15,8 +15,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from objslam_mapper.association import CLUTTER, Association, AssociationError, enumerate_associations
-from objslam_mapper.sampler import (
+from objslam_mapper.inference.association import CLUTTER, Association, AssociationError, enumerate_associations
+from objslam_mapper.inference.sampler import (
     REVERSE_MOVE,
     CachedLogTarget,
     ExactDistribution,

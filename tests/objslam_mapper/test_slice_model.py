@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from objslam_common.camera import CameraMount
+from objslam_common.geometry import wrap_angle
 
-from objslam_mapper.camera import CameraMount
-from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.slice_model import (
+from objslam_mapper.model.slice_model import (
     BEARING,
     ELEVATION_BOTTOM,
     ELEVATION_TOP,

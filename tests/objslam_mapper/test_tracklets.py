@@ -6,14 +6,12 @@ import dataclasses
 
 import numpy as np
 import pytest
+from objslam_common.catalog import load_catalog
+from objslam_common.records import ImageSlices, SliceMeasurement
 
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.problem import build_problem
-from objslam_mapper.records import ImageSlices, SliceMeasurement
-from objslam_mapper.slice_model import predict_slices
-from objslam_mapper.synthetic import SyntheticObject, simulate_run
-from objslam_mapper.tracklets import (
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.inference.tracklets import (
     ClassShape,
     TrackletConfig,
     chain_tracklets,
@@ -21,6 +19,8 @@ from objslam_mapper.tracklets import (
     estimate_range,
     tracklets_of_problem,
 )
+from objslam_mapper.model.slice_model import predict_slices
+from objslam_mapper.synthetic import SyntheticObject, simulate_run
 
 CATALOG = load_catalog()
 CONFIG = GraphConfig()

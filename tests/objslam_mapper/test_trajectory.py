@@ -8,16 +8,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from objslam_common.geometry import compose, interpolate_pose, wrap_angle
+from objslam_common.records import OdometrySample
 
-from objslam_mapper.geometry import compose, interpolate_pose, wrap_angle
-from objslam_mapper.graph_config import OdometryNoiseConfig
-from objslam_mapper.records import OdometrySample
-from objslam_mapper.trajectory import (
-    TrajectoryError,
-    increment_stddev,
-    odometry_increments,
-    poses_at_stamps,
-)
+from objslam_mapper.config import OdometryNoiseConfig
+from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 
 SECOND = 1_000_000_000
 
@@ -42,7 +37,7 @@ def test_interpolates_between_the_surrounding_samples():
 def test_stamps_outside_the_odometry_span_are_rejected_and_counted(caplog):
     odom = _odometry([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0)])
     stamps = [odom[0].stamp_ns - 1, odom[0].stamp_ns, odom[1].stamp_ns, odom[1].stamp_ns + 1, 0]
-    with caplog.at_level(logging.WARNING, logger="objslam_mapper.trajectory"):
+    with caplog.at_level(logging.WARNING, logger="objslam_mapper.model.odometry"):
         at = poses_at_stamps(odom, stamps)
     assert at.accepted.tolist() == [False, True, True, False, False]
     assert at.rejected_count == 3

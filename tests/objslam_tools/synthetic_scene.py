@@ -6,12 +6,12 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from objslam_common.camera import CameraMount, UnifiedCamera
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import wrap_angle
 
-from objslam_mapper.camera import CameraMount, UnifiedCamera
-from objslam_mapper.catalog import load_catalog
-from objslam_mapper.geometry import wrap_angle
 from objslam_mapper.map_file import BuiltMap, MappedObject, TrajectoryPose
-from objslam_mapper.slice_model import predict_slices
+from objslam_mapper.model.slice_model import predict_slices
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, write_ground_truth
 from objslam_tools.trajectory import transform_poses
 from tests.objslam_tools.synthetic_bag import camera_info_msg, image_msg, odometry_records, write_bag

@@ -122,8 +122,9 @@ def test_the_scaling_runs_build_the_real_workload_unless_told_otherwise():
 def test_cached_detections_are_keyed_on_the_detector():
     import dataclasses
 
+    from objslam_common.catalog import load_catalog
+
     from objslam_detector.config import DetectorConfig
-    from objslam_mapper.catalog import load_catalog
     from objslam_tools.bench.mapper import detector_fingerprint
 
     config, catalog = DetectorConfig(), load_catalog()

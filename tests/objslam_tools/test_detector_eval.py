@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 import pytest
+from objslam_common.camera import CameraMount
 
 from objslam_detector import DetectedSlice, Detector
-from objslam_mapper.camera import CameraMount
 from objslam_tools.cli import main
 from objslam_tools.detector_eval import (
     DetectorEvaluation,

@@ -64,8 +64,9 @@ def test_chosen_frames(bag_dir, tmp_path):
 
 def test_overlay_outline_encloses_the_rendered_object(bag_dir):
     """The sector the overlay draws covers the pixels the (ground-truth) renderer painted."""
-    from objslam_mapper.camera import CameraMount
-    from objslam_mapper.slice_model import predict_slices
+    from objslam_common.camera import CameraMount
+
+    from objslam_mapper.model.slice_model import predict_slices
 
     frame = next(open_bag(bag_dir).images())
     stamps, poses = scene.ground_truth_poses()

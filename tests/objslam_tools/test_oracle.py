@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from objslam_common.camera import CameraMount
+from objslam_common.records import ImageSlices, SliceMeasurement
 
-from objslam_mapper.camera import CameraMount
-from objslam_mapper.records import ImageSlices, SliceMeasurement
-from objslam_mapper.slice_model import predict_slices
+from objslam_mapper.model.slice_model import predict_slices
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject
 from objslam_tools.oracle import OracleOptions, oracle_assignment, truth_residual_chi2
 from objslam_tools.trajectory import PoseTrack

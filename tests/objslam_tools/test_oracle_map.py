@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from objslam_common.camera import CameraMount
+from objslam_common.catalog import load_catalog
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
-from objslam_mapper.camera import CameraMount
-from objslam_mapper.catalog import load_catalog
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.model.slice_model import predict_slices
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.problem import build_problem
-from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
-from objslam_mapper.slice_model import predict_slices
 from objslam_tools.cli import main
 from objslam_tools.evaluate import Reference, score_map
 from objslam_tools.ground_truth import GroundTruth

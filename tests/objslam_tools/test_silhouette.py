@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from objslam_common.camera import DEFAULT_CAMERA, CameraMount
+from objslam_common.catalog import load_catalog
 
-from objslam_mapper.camera import DEFAULT_CAMERA, CameraMount
-from objslam_mapper.catalog import load_catalog
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject, Room, Table
 from objslam_tools.silhouette import view_top_elevation, visible_objects
 from objslam_tools.sim import Renderer, Scene

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from objslam_mapper.problem import build_problem
-from objslam_mapper.solver import solve
+from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, simulate_run
 from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, STEP_NS, draw_scene
 

@@ -19,8 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from objslam_common.catalog import Catalog
+
     from objslam_detector.config import ColorConfig
-    from objslam_mapper.catalog import Catalog
 
 OVERRIDE_KEYS = ("hue_deg", "hue_halfwidth_deg", "min_saturation", "min_value")
 # OpenCV's 8-bit "full" HSV stores hue in 0..255 for 0..360 deg.

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from objslam_common.config import setting
+
 from objslam_detector.colors import parse_class_overrides
-from objslam_mapper.config import setting
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,9 @@ from collections import OrderedDict
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
+from objslam_common.catalog import Catalog, load_catalog
+from objslam_common.config import ConfigError
 
 from objslam_detector.blobs import Blob, Segmenter, clean, strip
 from objslam_detector.colors import ColorGate, classify, derive_gates
@@ -21,9 +24,6 @@ from objslam_detector.images import as_color_image, check_size
 from objslam_detector.measure import measure
 from objslam_detector.panorama import Panorama
 from objslam_detector.slices import DetectedSlice
-from objslam_mapper.camera import UnifiedCamera
-from objslam_mapper.catalog import Catalog, load_catalog
-from objslam_mapper.config import ConfigError
 
 logger = logging.getLogger(__name__)
 

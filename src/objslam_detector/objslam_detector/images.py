@@ -11,6 +11,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
 
 from objslam_detector.errors import (
     CORRUPT_COMPRESSED,
@@ -19,7 +20,6 @@ from objslam_detector.errors import (
     UNSUPPORTED_ENCODING,
     DetectorInputError,
 )
-from objslam_mapper.camera import UnifiedCamera
 
 # encoding -> (channels, channel order of the colour planes)
 ENCODINGS: dict[str, tuple[int, str]] = {

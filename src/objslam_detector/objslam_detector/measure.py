@@ -16,12 +16,12 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
+from objslam_common.geometry import wrap_angle
 
 from objslam_detector.blobs import Blob, strip
 from objslam_detector.panorama import Panorama
 from objslam_detector.slices import DetectedSlice
-from objslam_mapper.camera import UnifiedCamera
-from objslam_mapper.geometry import wrap_angle
 
 MARGIN_PX = 3
 # Below this chroma step (grey levels) between object and surroundings the crossing is noise.

@@ -7,10 +7,10 @@ from collections.abc import Iterable, Mapping
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
 
 from objslam_detector.images import as_color_image
 from objslam_detector.slices import DetectedSlice
-from objslam_mapper.camera import UnifiedCamera
 
 _DEFAULT_RGB = (255, 255, 255)
 _ARC_POINTS = 24

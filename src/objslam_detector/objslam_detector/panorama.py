@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
+from objslam_common.geometry import wrap_angle
 
 from objslam_detector.config import PanoramaConfig
-from objslam_mapper.camera import UnifiedCamera
-from objslam_mapper.geometry import wrap_angle
 
 # Stay this far below the model's limit elevation asin(xi), where radii blow up.
 _LIMIT_MARGIN_RAD = math.radians(1.0)

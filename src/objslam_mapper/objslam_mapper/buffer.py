@@ -18,7 +18,7 @@ import logging
 from collections import deque
 from dataclasses import dataclass, field
 
-from objslam_mapper.records import ImageSlices, OdometrySample
+from objslam_common.records import ImageSlices, OdometrySample
 
 logger = logging.getLogger(__name__)
 

@@ -16,8 +16,7 @@ from typing import Any
 
 import numpy as np
 import yaml
-
-from objslam_mapper.config import ConfigError, read_yaml
+from objslam_common.config import ConfigError, read_yaml
 
 logger = logging.getLogger(__name__)
 

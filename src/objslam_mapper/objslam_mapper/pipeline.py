@@ -12,19 +12,14 @@ import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from objslam_mapper.catalog import Catalog
-from objslam_mapper.config import setting
-from objslam_mapper.graph_config import (
-    CameraMountConfig,
-    GraphConfig,
-    OdometryNoiseConfig,
-    SliceNoiseConfig,
-    SolverConfig,
-)
-from objslam_mapper.inference import PhaseProgress, SamplerConfig
-from objslam_mapper.inference import build_map as _infer
+from objslam_common.catalog import Catalog
+from objslam_common.config import setting
+from objslam_common.records import ImageSlices, OdometrySample
+
+from objslam_mapper.config import CameraMountConfig, GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
+from objslam_mapper.inference.infer import PhaseProgress, SamplerConfig
+from objslam_mapper.inference.infer import build_map as _infer
 from objslam_mapper.map_file import BuiltMap
-from objslam_mapper.records import ImageSlices, OdometrySample
 
 
 @dataclass(frozen=True)

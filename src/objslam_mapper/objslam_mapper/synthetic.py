@@ -16,15 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import CameraMount
+from objslam_common.catalog import Catalog, load_catalog
+from objslam_common.geometry import between, compose, wrap_angle
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
-from objslam_mapper.camera import CameraMount
-from objslam_mapper.catalog import Catalog, load_catalog
-from objslam_mapper.geometry import between, compose, wrap_angle
-from objslam_mapper.graph_config import GraphConfig
-from objslam_mapper.problem import GraphProblem, class_measurement_stddev
-from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
-from objslam_mapper.slice_model import predict_slices
-from objslam_mapper.trajectory import increment_stddev, poses_at_stamps
+from objslam_mapper.config import GraphConfig
+from objslam_mapper.graph.problem import GraphProblem, class_measurement_stddev
+from objslam_mapper.model.odometry import increment_stddev, poses_at_stamps
+from objslam_mapper.model.slice_model import predict_slices
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,7 @@ def simulate_run(
     like the mapper does, so an exact run is exactly consistent with the model.
     ``odometry_calibration`` = (distance scale, turn scale, turn bias rad/m) is a systematic
     odometry error, applied to each true increment as the graph models it
-    (:mod:`objslam_mapper.normal_equations`) before the random noise.
+    (:mod:`objslam_mapper.graph.normal_equations`) before the random noise.
     """
     config = config or GraphConfig()
     mount = mount or config.camera_mount.to_mount()

@@ -8,7 +8,7 @@ classes stay inside this module. Usage::
     for msg in bag.raw_messages(["/odom"]):     # RawMessage(topic, stamp_ns, data, msgtype), time order
         ...
     odom = bag.read_odometry()                  # PoseTrack: stamps_ns (N,) int64, poses (N, 3)
-    camera = bag.read_camera()                  # objslam_mapper.camera.UnifiedCamera
+    camera = bag.read_camera()                  # objslam_common.camera.UnifiedCamera
     for frame in bag.images():                  # ImageFrame(stamp_ns, encoding, data)
         rgb = decode_rgb(frame)                 # (H, W, 3) uint8
 
@@ -28,13 +28,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import CameraModelError, UnifiedCamera
+from objslam_common.geometry import yaw_from_quaternion
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 
-from objslam_mapper.camera import CameraModelError, UnifiedCamera
-from objslam_mapper.geometry import yaw_from_quaternion
 from objslam_tools.errors import UserError
 from objslam_tools.trajectory import PoseTrack
 

@@ -15,7 +15,8 @@ import os
 import pkgutil
 import sys
 
-from objslam_mapper.config import ConfigError
+from objslam_common.config import ConfigError
+
 from objslam_tools import commands
 from objslam_tools.errors import UserError
 

@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
+from objslam_common.geometry import wrap_angle
 from scipy.optimize import linear_sum_assignment
 
 from objslam_detector import DetectedSlice, Detector, DetectorInputError, decode_compressed, draw_slices
-from objslam_mapper.camera import UnifiedCamera
-from objslam_mapper.geometry import wrap_angle
 from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC, ImageFrame, open_bag
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import Distractor, GroundTruth, load_ground_truth

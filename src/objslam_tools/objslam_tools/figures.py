@@ -8,7 +8,7 @@
 - :func:`overlay_figure`: the map's objects projected back into one omnidirectional image
   with the map's own pose at that image: each object's predicted silhouette sector
   (bearing +- half width between the elevations of its lower and upper edges, from
-  :func:`objslam_mapper.slice_model.predict_slices`) drawn through the camera model;
+  :func:`objslam_mapper.model.slice_model.predict_slices`) drawn through the camera model;
   objects with existence probability <= 1/2 are dashed and circled.
 - :func:`write_figures` writes both kinds for a map (and a bag) and returns the paths.
 """
@@ -27,11 +27,11 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Ellipse, Patch
 from numpy.typing import NDArray
+from objslam_common.camera import DEFAULT_CAMERA, CameraMount, UnifiedCamera
+from objslam_common.catalog import Catalog, load_catalog
 
-from objslam_mapper.camera import DEFAULT_CAMERA, CameraMount, UnifiedCamera
-from objslam_mapper.catalog import Catalog, load_catalog
 from objslam_mapper.map_file import BuiltMap, MappedObject
-from objslam_mapper.slice_model import predict_slices
+from objslam_mapper.model.slice_model import predict_slices
 from objslam_tools.bag import Bag, ImageFrame, decode_rgb, open_bag
 from objslam_tools.errors import UserError
 from objslam_tools.evaluate import Alignment, Reference, align_map, load_reference, map_track

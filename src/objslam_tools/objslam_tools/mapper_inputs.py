@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
 from objslam_detector.detector import Detector
 from objslam_detector.slices import DetectedSlice
-from objslam_mapper.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_tools.bag import ODOM_TOPIC, Bag
 from objslam_tools.detector_eval import frame_pixels
 

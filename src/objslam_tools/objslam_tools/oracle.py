@@ -2,7 +2,7 @@
 
 For every image, each ground-truth object of the slice's class is predicted into the
 image from the ground-truth pose at the image stamp with
-:func:`objslam_mapper.slice_model.predict_slices` (the silhouette's real extremes: bearing
+:func:`objslam_mapper.model.slice_model.predict_slices` (the silhouette's real extremes: bearing
 of the axis, width ``2 asin(r/D)``, near/far rims for the elevations). A slice is
 explained by a candidate when
 
@@ -44,12 +44,12 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from objslam_common.camera import CameraMount
+from objslam_common.geometry import wrap_angle
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
-from objslam_mapper.camera import CameraMount
-from objslam_mapper.geometry import wrap_angle
-from objslam_mapper.slice_model import (
+from objslam_mapper.model.slice_model import (
     BEARING,
     ELEVATION_BOTTOM,
     ELEVATION_TOP,
@@ -73,7 +73,7 @@ class SliceLike(Protocol):
 
 
 class ImageSlicesLike(Protocol):
-    """E.g. objslam_mapper.records.ImageSlices."""
+    """E.g. objslam_common.records.ImageSlices."""
 
     stamp_ns: int
     slices: Sequence[SliceLike]

@@ -8,7 +8,7 @@ any association). Those measurements are grouped by their real object; slices of
 and slices the model cannot explain from their object at the truth (merged blobs:
 :func:`objslam_tools.oracle.truth_residual_chi2`), are left out (clutter), and the map is
 one known-association solve with marginals
-(:func:`objslam_mapper.baselines.map_of_groups`). It lives here, not in the core, because
+(:func:`objslam_mapper.inference.baselines.map_of_groups`). It lives here, not in the core, because
 the core never reads ground truth. :func:`oracle_problem` gives the diagnostics in
 ``scripts/`` a simulated bag's problem and its ground-truth association in one call.
 """
@@ -21,17 +21,17 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+from objslam_common.catalog import Catalog
+from objslam_common.config import load_config
+from objslam_common.records import ImageSlices, OdometrySample
 
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
-from objslam_mapper.baselines import map_of_groups
-from objslam_mapper.catalog import Catalog
-from objslam_mapper.config import load_config
+from objslam_mapper.graph.problem import GraphProblem, build_problem
+from objslam_mapper.inference.baselines import map_of_groups
+from objslam_mapper.inference.tracklets import tracklets_of_problem
 from objslam_mapper.map_file import BuiltMap
 from objslam_mapper.pipeline import MapperConfig
-from objslam_mapper.problem import GraphProblem, build_problem
-from objslam_mapper.records import ImageSlices, OdometrySample
-from objslam_mapper.tracklets import tracklets_of_problem
 from objslam_tools.bag import open_bag
 from objslam_tools.evaluate import Reference, load_reference
 from objslam_tools.ground_truth import GroundTruth

@@ -1,7 +1,7 @@
 """What the camera really sees of each ground-truth object in one image.
 
 The unoccluded sector (bearing, angular width, lowest and highest elevation) is the
-mapper's measurement model, :func:`objslam_mapper.slice_model.predict_slices`. On top of
+mapper's measurement model, :func:`objslam_mapper.model.slice_model.predict_slices`. On top of
 it this module works out, by sampling the silhouette in azimuth and elevation:
 
 - the lower edge actually visible: a table taller than the camera hides the lowest part
@@ -25,9 +25,9 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from objslam_common.camera import UnifiedCamera
 
-from objslam_mapper.camera import UnifiedCamera
-from objslam_mapper.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_slices
+from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_slices
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject
 from objslam_tools.sim.scene import SIGN_POST_RADIUS_M
 

@@ -5,7 +5,7 @@ the MH chain (proposals, screens, graph solves, clutter solves), marginals and A
 The detector runs first and is timed on its own line (``objslam bench detector`` measures it).
 
 The naive baseline (issue 7) is one fresh GTSAM Levenberg-Marquardt solve per MH step,
-with one CustomFactor per detection (:func:`objslam_mapper.gtsam_backend.time_naive_solves`):
+with one CustomFactor per detection (:func:`objslam_mapper.graph.gtsam_backend.time_naive_solves`):
 a few such solves are timed on the chain's start association and proposals from it, and
 extrapolated to the whole chain.
 
@@ -72,7 +72,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _config(args: argparse.Namespace, samples: int, burn_in: int) -> Any:
-    from objslam_mapper.config import default_config_dir, load_config
+    from objslam_common.config import default_config_dir, load_config
+
     from objslam_mapper.pipeline import MapperConfig
 
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
@@ -99,10 +100,11 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
 
     A cached entry is used only for the same bag files and the same detector (code, settings, catalog).
     """
+    from objslam_common.catalog import load_catalog
+    from objslam_common.config import load_config
+
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
-    from objslam_mapper.catalog import load_catalog
-    from objslam_mapper.config import load_config
     from objslam_tools.bag import open_bag
     from objslam_tools.mapper_inputs import detect_bag, odometry_samples
 
@@ -130,9 +132,10 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
 
 def _build(odometry: tuple, images: tuple, config: Any) -> dict[str, Any]:
     """Time one map build (problem included, detector excluded)."""
-    from objslam_mapper.catalog import load_catalog
-    from objslam_mapper.inference import infer_map
-    from objslam_mapper.problem import build_problem
+    from objslam_common.catalog import load_catalog
+
+    from objslam_mapper.graph.problem import build_problem
+    from objslam_mapper.inference.infer import infer_map
 
     catalog = load_catalog(config.catalog_file or None)
     wall, cpu = time.perf_counter(), time.process_time()
@@ -149,10 +152,10 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
     """Seconds per naive GTSAM solve on the start association and proposals from it."""
     import numpy as np
 
-    from objslam_mapper.gtsam_backend import time_naive_solves
-    from objslam_mapper.inference import AssociationTarget, initial_association
-    from objslam_mapper.sampler import MetropolisHastings
-    from objslam_mapper.tracklets import tracklets_of_problem
+    from objslam_mapper.graph.gtsam_backend import time_naive_solves
+    from objslam_mapper.inference.infer import AssociationTarget, initial_association
+    from objslam_mapper.inference.sampler import MetropolisHastings
+    from objslam_mapper.inference.tracklets import tracklets_of_problem
 
     sampler_cfg = config.sampler
     chained = tracklets_of_problem(problem, sampler_cfg.tracklets)
@@ -201,8 +204,7 @@ def scaling_chain(args: argparse.Namespace) -> tuple[int, int]:
 
 def _scaling(args: argparse.Namespace, cache_dir: Path) -> dict[str, Any]:
     import numpy as np
-
-    from objslam_mapper.config import default_config_dir
+    from objslam_common.config import default_config_dir
 
     rows = []
     samples, burn_in = scaling_chain(args)

@@ -37,9 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import cv2
+    from objslam_common.config import load_config
 
     from objslam_detector import Detector, DetectorConfig
-    from objslam_mapper.config import load_config
     from objslam_tools.commands.sim import _StderrProgress
     from objslam_tools.detector_eval import EvalOptions, evaluate_bag, format_report
     from objslam_tools.errors import UserError

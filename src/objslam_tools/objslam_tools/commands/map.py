@@ -44,11 +44,11 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     import cv2
+    from objslam_common.catalog import load_catalog
+    from objslam_common.config import default_config_dir, load_config
 
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
-    from objslam_mapper.catalog import load_catalog
-    from objslam_mapper.config import default_config_dir, load_config
     from objslam_mapper.map_file import write_map
     from objslam_mapper.pipeline import MapperConfig, build_map
     from objslam_tools.bag import open_bag
@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
         built = build_oracle_map(odometry, images, catalog, config, *oracle_truth)
     else:
-        from objslam_mapper.baselines import build_baseline_map
+        from objslam_mapper.inference.baselines import build_baseline_map
 
         associating = StderrProgress("associating", unit="tracklets")
         built = build_baseline_map(

@@ -10,8 +10,8 @@ import argparse
 import importlib
 
 NODES = {
-    "detector": ("objslam_detector.node", "the detector node: images -> /objslam/slices"),
-    "mapper": ("objslam_mapper.node", "the mapper node: buffers odometry and slices, serves /objslam/build_map"),
+    "detector": ("objslam_detector.ros.node", "the detector node: images -> /objslam/slices"),
+    "mapper": ("objslam_mapper.ros.node", "the mapper node: buffers odometry and slices, serves /objslam/build_map"),
 }
 
 

@@ -11,10 +11,9 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import UnifiedCamera
+from objslam_common.geometry import quaternion_from_yaw
 from rosbags.typesys import Stores, get_typestore
-
-from objslam_mapper.camera import UnifiedCamera
-from objslam_mapper.geometry import quaternion_from_yaw
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 IMAGE = "sensor_msgs/msg/Image"

@@ -15,9 +15,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.geometry import rotation, wrap_angle
 from scipy.interpolate import CubicSpline
-
-from objslam_mapper.geometry import rotation, wrap_angle
 
 
 class PathError(ValueError):

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from objslam_common.camera import DEFAULT_CAMERA, CameraMount, UnifiedCamera
+from objslam_common.geometry import wrap_angle
 
-from objslam_mapper.camera import DEFAULT_CAMERA, CameraMount, UnifiedCamera
-from objslam_mapper.geometry import wrap_angle
 from objslam_tools.sim.scene import POST_RGB, SIGN_POST_RADIUS_M, TABLE_RGB, Scene
 
 # Element indices of the room; things in the scene follow.

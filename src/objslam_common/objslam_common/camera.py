@@ -1,0 +1,170 @@
+"""The central omnidirectional camera: unified (Mei) sphere model and its mount.
+
+Conventions (DESIGN.md, data contract): the optical axis is vertical and the image
+centre looks straight down. A direction with azimuth ``a`` (counter-clockwise from the
+camera's forward axis) and elevation ``e`` (above the horizontal) is the unit-sphere
+point ``(cos e cos a, cos e sin a, -sin e)``; with ``m = (x_s, y_s) / (z_s + xi)`` the
+pixel is ``u = cx + fx m_x``, ``v = cy - fy m_y``. Radius grows with elevation and the
+horizon is the ring ``r = f / xi``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from objslam_common.geometry import rotation, wrap_angle
+
+
+class CameraModelError(ValueError):
+    """A calibration that the unified model cannot represent."""
+
+
+@dataclass(frozen=True)
+class UnifiedCamera:
+    """Intrinsics of the unified sphere model (sensor_msgs/CameraInfo, model "unified")."""
+
+    width_px: int
+    height_px: int
+    xi: float
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def __post_init__(self) -> None:
+        if self.width_px <= 0 or self.height_px <= 0:
+            raise CameraModelError(f"image size must be positive, got {self.width_px}x{self.height_px}")
+        if not (0.0 < self.xi <= 1.0):
+            # xi > 1 would make the horizon ring fold back; our rigs are mirrors with xi <= 1.
+            raise CameraModelError(f"xi must be in (0, 1], got {self.xi}")
+        if self.fx <= 0.0 or self.fy <= 0.0:
+            raise CameraModelError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+
+    @property
+    def max_elevation_rad(self) -> float:
+        """Elevation where z_s + xi = 0: directions at or above it do not project."""
+        return float(np.arcsin(self.xi))
+
+    @property
+    def horizon_radius_px(self) -> float:
+        """Radius (in x, with fx) of the ring where elevation is zero."""
+        return self.fx / self.xi
+
+    def project(self, azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> tuple[NDArray, NDArray]:
+        """Pixel (u, v) of directions; NaN where a direction does not project."""
+        a = np.asarray(azimuth_rad, dtype=float)
+        e = np.asarray(elevation_rad, dtype=float)
+        ce = np.cos(e)
+        denom = -np.sin(e) + self.xi
+        with np.errstate(divide="ignore", invalid="ignore"):
+            valid = denom > 1e-9
+            mx = np.where(valid, ce * np.cos(a) / denom, np.nan)
+            my = np.where(valid, ce * np.sin(a) / denom, np.nan)
+        return self.cx + self.fx * mx, self.cy - self.fy * my
+
+    def unproject(self, u_px: ArrayLike, v_px: ArrayLike) -> tuple[NDArray, NDArray]:
+        """Direction (azimuth, elevation) seen at pixels (u, v)."""
+        mx = (np.asarray(u_px, dtype=float) - self.cx) / self.fx
+        my = (self.cy - np.asarray(v_px, dtype=float)) / self.fy
+        r2 = mx * mx + my * my
+        # Lift the normalized point back onto the unit sphere (Mei & Rives, 2007).
+        disc = 1.0 + (1.0 - self.xi * self.xi) * r2
+        factor = (self.xi + np.sqrt(np.maximum(disc, 0.0))) / (r2 + 1.0)
+        xs, ys, zs = factor * mx, factor * my, factor - self.xi
+        azimuth = wrap_angle(np.arctan2(ys, xs))
+        elevation = np.arctan2(-zs, np.hypot(xs, ys))
+        return azimuth, elevation
+
+    def radius_px(self, elevation_rad: ArrayLike) -> NDArray:
+        """Image radius of an elevation, in pixels of fx (fx == fy in our rigs)."""
+        e = np.asarray(elevation_rad, dtype=float)
+        return self.fx * np.cos(e) / (self.xi - np.sin(e))
+
+    @classmethod
+    def from_camera_info(
+        cls, width: int, height: int, distortion_model: str, d: ArrayLike, k: ArrayLike
+    ) -> UnifiedCamera:
+        """Build from the fields of sensor_msgs/CameraInfo (passed as plain values)."""
+        if distortion_model != "unified":
+            raise CameraModelError(f"distortion_model must be 'unified', got {distortion_model!r}")
+        d = list(d)
+        k = list(k)
+        if len(d) < 1 or len(k) != 9:
+            raise CameraModelError(f"expected d=[xi] and 9 values of k, got d={d}, k of length {len(k)}")
+        return cls(
+            width_px=int(width),
+            height_px=int(height),
+            xi=float(d[0]),
+            fx=float(k[0]),
+            fy=float(k[4]),
+            cx=float(k[2]),
+            cy=float(k[5]),
+        )
+
+
+DEFAULT_CAMERA = UnifiedCamera(width_px=640, height_px=640, xi=0.9, fx=170.0, fy=170.0, cx=320.0, cy=320.0)
+
+
+@dataclass(frozen=True)
+class CameraMount:
+    """Where the camera sits on the robot: base_T_camera in the plane plus its height.
+
+    Default: on the robot's rotation axis, 0.5 m above the floor, looking forward.
+    """
+
+    height_m: float = 0.5
+    offset_x_m: float = 0.0
+    offset_y_m: float = 0.0
+    yaw_rad: float = 0.0
+
+    def camera_pose(self, map_T_base: ArrayLike) -> NDArray[np.float64]:
+        """map_T_camera (x, y, yaw) of the camera for a robot pose map_T_base."""
+        p = np.asarray(map_T_base, dtype=float)
+        xy = p[:2] + rotation(p[2]) @ np.array([self.offset_x_m, self.offset_y_m])
+        return np.array([xy[0], xy[1], wrap_angle(p[2] + self.yaw_rad)])
+
+    def direction_to(self, map_T_base: ArrayLike, map_points_xyz: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
+        """Azimuth, elevation (camera frame, rad) and horizontal range (m) of map points."""
+        cam = self.camera_pose(map_T_base)
+        pts = np.atleast_2d(np.asarray(map_points_xyz, dtype=float))
+        dx = pts[:, 0] - cam[0]
+        dy = pts[:, 1] - cam[1]
+        rng = np.hypot(dx, dy)
+        azimuth = wrap_angle(np.arctan2(dy, dx) - cam[2])
+        elevation = np.arctan2(pts[:, 2] - self.height_m, rng)
+        return azimuth, elevation, rng
+
+
+@dataclass(frozen=True, eq=False)
+class CameraMounts:
+    """One camera mount per measurement: ``CameraMount``'s fields, the planar ones as (M,) arrays.
+
+    A slice seen from an image that is not a graph pose (``objslam_mapper.graph.keyframes``)
+    is predicted from the graph pose before it: the camera then sits at
+    ``graph_T_image ∘ base_T_camera`` relative to that pose. The slice model takes this
+    wherever it takes a ``CameraMount`` (the fields broadcast over measurements).
+    """
+
+    height_m: float
+    offset_x_m: NDArray[np.float64]
+    offset_y_m: NDArray[np.float64]
+    yaw_rad: NDArray[np.float64]
+
+    @classmethod
+    def behind(cls, mount: CameraMount, graph_T_base: ArrayLike) -> CameraMounts:
+        """The mounts of cameras on robots at (M, 3) poses ``graph_T_base`` relative to the graph poses."""
+        pose = np.atleast_2d(np.asarray(graph_T_base, dtype=float))
+        cos_t, sin_t = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        return cls(
+            height_m=mount.height_m,
+            offset_x_m=pose[:, 0] + cos_t * mount.offset_x_m - sin_t * mount.offset_y_m,
+            offset_y_m=pose[:, 1] + sin_t * mount.offset_x_m + cos_t * mount.offset_y_m,
+            yaw_rad=pose[:, 2] + mount.yaw_rad,
+        )
+
+    def take(self, index: ArrayLike) -> CameraMounts:
+        """The mounts of measurements ``index``."""
+        return CameraMounts(self.height_m, self.offset_x_m[index], self.offset_y_m[index], self.yaw_rad[index])

@@ -1,0 +1,1 @@
+"""ROS helpers of the nodes: parameters, message conversions, the spin loop."""

@@ -1,0 +1,171 @@
+"""The ``detector`` node: images (raw or compressed) + camera info -> ``/objslam/slices``.
+
+A thin wrapper over :class:`objslam_detector.detector.Detector`. A frame that cannot be
+used (unsupported encoding, size not matching the calibration, corrupt compressed data,
+empty image) is skipped with a warning saying why, at most one per reason every
+``WARN_PERIOD_S``, and counted per reason. Until the camera info comes the latest few
+images are held (one warning); older ones are counted as skipped for "no camera info".
+The counts are in :meth:`DetectorNode.summary`, printed at shutdown.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from objslam_common.camera import CameraModelError, UnifiedCamera
+from objslam_common.catalog import load_catalog
+from objslam_common.ros.params import declare_config
+from objslam_common.ros.spin import run_node
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from objslam_detector.config import DetectorConfig
+from objslam_detector.detector import Detector
+from objslam_detector.errors import DetectorInputError
+from objslam_detector.images import decode_compressed, image_from_buffer
+from objslam_detector.overlay import draw_slices
+from objslam_detector.slices import DetectedSlice
+from objslam_msgs.msg import Slice, SliceArray
+
+SLICES_TOPIC = "/objslam/slices"
+DEBUG_IMAGE_TOPIC = "/objslam/detector/debug_image"
+WARN_PERIOD_S = 5.0
+PENDING_IMAGES = 10
+NO_CAMERA_INFO = "no camera info"  # beside the reasons of objslam_detector.errors
+
+
+def slice_to_msg(detected: DetectedSlice) -> Slice:
+    return Slice(
+        label=detected.label,
+        confidence=float(detected.confidence),
+        bearing=float(detected.bearing_rad),
+        angular_width=float(detected.angular_width_rad),
+        elevation_bottom=float(detected.elevation_bottom_rad),
+        elevation_top=float(detected.elevation_top_rad),
+        radius_inner_px=float(detected.radius_inner_px),
+        radius_outer_px=float(detected.radius_outer_px),
+        angle_start_rad=float(detected.angle_start_rad),
+        angle_end_rad=float(detected.angle_end_rad),
+        pixel_count=int(detected.pixel_count),
+    )
+
+
+class DetectorNode(Node):
+    def __init__(self) -> None:
+        super().__init__("detector")
+        self.config = declare_config(self, DetectorConfig)
+        catalog = load_catalog(self.config.catalog_file or None)
+        self.detector = Detector(self.config, catalog)
+        self.class_rgb = {c.label: c.color_rgb for c in catalog}
+        self.camera: UnifiedCamera | None = None
+        self.skipped: Counter[str] = Counter()  # reason -> frames skipped
+        self.processed = 0
+        self._last_warned: dict[str, float] = {}  # reason -> monotonic time of its last warning
+        # Camera info and the first images arrive together, in an order the executor picks:
+        # hold the latest few images until the calibration is known instead of losing them.
+        self._pending: deque[tuple[Any, Callable[[], tuple[np.ndarray, str]]]] = deque()
+
+        self.slices_pub = self.create_publisher(SliceArray, SLICES_TOPIC, QoSProfile(depth=100))
+        self.debug_pub = (
+            self.create_publisher(Image, DEBUG_IMAGE_TOPIC, qos_profile_sensor_data)
+            if self.config.publish_debug_image
+            else None
+        )
+        self.create_subscription(
+            CameraInfo, self.config.camera_info_topic, self.on_camera_info, qos_profile_sensor_data
+        )
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        image_qos = reliable if self.config.reliable_images else qos_profile_sensor_data
+        if self.config.use_compressed:
+            topic = self.config.image_topic.rstrip("/") + "/compressed"
+            self.create_subscription(CompressedImage, topic, self.on_compressed, image_qos)
+        else:
+            topic = self.config.image_topic
+            self.create_subscription(Image, topic, self.on_raw, image_qos)
+        self.get_logger().info(
+            f"detecting {', '.join(catalog.labels)} on {topic}; slices on {SLICES_TOPIC}"
+            + (f", debug image on {DEBUG_IMAGE_TOPIC}" if self.debug_pub else "")
+        )
+
+    def on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = UnifiedCamera.from_camera_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+        except CameraModelError as exc:
+            self.get_logger().warn(f"ignoring camera info: {exc}", throttle_duration_sec=WARN_PERIOD_S)
+            return
+        self.camera = camera
+        while self._pending:
+            self._process(*self._pending.popleft())
+
+    def on_raw(self, msg: Image) -> None:
+        self._process(
+            msg.header,
+            lambda: (image_from_buffer(msg.data, msg.width, msg.height, msg.encoding, msg.step), msg.encoding),
+        )
+
+    def on_compressed(self, msg: CompressedImage) -> None:
+        self._process(msg.header, lambda: decode_compressed(msg.data, msg.format))
+
+    def summary(self) -> str:
+        """E.g. ``processed 90 frames, skipped {'no camera info': 3, 'size mismatch': 5}``."""
+        skipped = f", skipped {dict(sorted(self.skipped.items()))}" if self.skipped else ""
+        return f"processed {self.processed} frames{skipped}"
+
+    def _skip(self, reason: str, detail: str) -> None:
+        self.skipped[reason] += 1
+        # Rate-limited per reason, not per detail: details vary from frame to frame (sizes,
+        # byte counts) and would let a stream of bad frames warn for every one, while a
+        # second, different problem is still reported at once.
+        now = time.monotonic()
+        if now - self._last_warned.get(reason, -math.inf) >= WARN_PERIOD_S:
+            self._last_warned[reason] = now
+            self.get_logger().warn(
+                f"skipped a frame ({reason}: {self.skipped[reason]} so far, "
+                f"warning at most every {WARN_PERIOD_S:g} s): {detail}"
+            )
+
+    def _process(self, header, decode) -> None:
+        if self.camera is None:
+            self.get_logger().warn(
+                f"waiting for camera info on {self.config.camera_info_topic}; holding the latest "
+                f"{PENDING_IMAGES} images and skipping older ones until it arrives",
+                once=True,
+            )
+            if len(self._pending) == PENDING_IMAGES:
+                self._pending.popleft()
+                self.skipped[NO_CAMERA_INFO] += 1
+            self._pending.append((header, decode))
+            return
+        try:
+            image, encoding = decode()
+            slices = self.detector.detect(image, self.camera, encoding)
+        except DetectorInputError as exc:
+            self._skip(exc.reason, str(exc))
+            return
+        self.processed += 1
+        self.slices_pub.publish(SliceArray(header=header, slices=[slice_to_msg(s) for s in slices]))
+        if self.debug_pub is not None:
+            self._publish_debug(header, image, encoding, slices)
+
+    def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[DetectedSlice]) -> None:
+        drawn = draw_slices(image, slices, self.camera, encoding, self.class_rgb)
+        msg = Image(
+            header=header, height=drawn.shape[0], width=drawn.shape[1], encoding="rgb8", step=drawn.shape[1] * 3
+        )
+        msg.data = drawn.tobytes()
+        self.debug_pub.publish(msg)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node("detector", DetectorNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

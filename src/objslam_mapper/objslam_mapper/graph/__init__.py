@@ -1,0 +1,1 @@
+"""The factor graph of one association: problem, keyframes, linear systems, solvers, covariances."""

@@ -1,0 +1,309 @@
+r"""Missed detections: an object must also explain the images it is absent from.
+
+The paper's likelihood (and the evidence of :mod:`objslam_mapper.graph.solver`) scores the
+slices an object owns and nothing else, as if an object were detected exactly where it was
+seen. Then two short tracklets far apart in time can together pin a confident *ghost*: on
+a rendered office, six slices of a cyan object blurred with a poster behind it, on the
+first pass, and eight of the poster alone, 390 images later, made a cyan object where
+there was none, which the robot faced in 190 images without ever detecting it.
+
+The detector is modelled instead: in every image, each thing the camera should see is
+detected with probability ``P_d`` (``detection.probability``), independently of the other
+images and things. A detection costs ``log P_d`` whatever explains it (an object or a
+distractor: both are things that are there), so those terms are the same in every
+association and drop out (for the slices of independent false alarms, a small bias of
+0.36 nats per slice at the default, against the ~20 nats a slice is worth to an object).
+What differs is the misses: the likelihood of ``J`` gains, per object and per distractor
+(the cylinder it is fitted as),
+
+    n_miss log(1 - P_d),
+
+``n_miss`` the images where it should be seen and has none of its slices. "Should be
+seen", at the MAP of ``J`` (:func:`sightings`):
+
+- its predicted angular width is at least ``detection.min_angular_width_rad`` (twice the
+  detector's narrowest blob by default: marginal blobs are not counted as misses), and it
+  is no farther than ``detection.max_range_m``;
+- its lower edge is below the top of the camera's view, read off the data: the
+  ``detection.view_top_quantile`` quantile of every slice's upper edge (a slice of an
+  object cut by the edge of the view has its upper edge there);
+- nearer objects, distractors and tables do not together cover more than half of its
+  silhouette (the rectangle of its bearing interval and its elevations, up to the top of
+  the view). Elevations count: a short object in front of a tall one leaves its upper part
+  in view, which the detector sees. Tables count: DESIGN.md puts every object whose class
+  stands above the floor on a grey table (``detection.table_diameter_m`` across, as tall as
+  the object's base), which the detector does not see but which hides what is behind it.
+  Without them, two objects of one class standing where one does (a duplicate) hid what is
+  behind that place better than the narrower single object, in the images where the real
+  table hides it: the target preferred the duplicate by 13-21 nats on ``twins``; with
+  them, the best states of unscreened chains with and without it score within a nat.
+
+Distractors pay their misses as objects do: otherwise clutter would be an escape from the
+term (an object split in two across a loop misses in the images of the other half; as a
+distractor it would not), and the chain would clear real objects into it. A flat poster
+is not seen from behind, which a cylinder is: such misses make independent false alarms
+(no misses) more attractive for it, which keeps it in clutter all the same. What the
+visibility test gets wrong (lighting, a table's size, a thing half hidden) shows up as a
+few misses of real objects; at the default ``P_d = 0.7`` a miss costs 1.2 nats, a slice an
+object owns is worth about 20 to it, so a real object is never lost to them, while a ghost
+in view of hundreds of images without a detection pays hundreds of nats.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from objslam_common.config import setting
+from objslam_common.geometry import wrap_angle
+
+from objslam_mapper.graph.problem import GraphProblem
+from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_reduced
+
+
+@dataclass(frozen=True)
+class DetectionConfig:
+    """The detector's detection probability and when an object counts as in view."""
+
+    enabled: bool = setting(True, "objects pay for the images where they should be seen and are not")
+    probability: float = setting(
+        0.7, "probability that an object in view is detected in an image", minimum=1e-6, maximum=1.0 - 1e-6
+    )
+    min_angular_width_rad: float = setting(
+        0.035, "an object counts as in view only when its predicted width is at least this (rad)", minimum=0.0
+    )
+    max_range_m: float = setting(
+        10.0,
+        "... and no farther than this (m): beyond it a detector may lose small or dim objects for reasons "
+        "this model does not know, and a real object must not pay for that",
+        minimum=0.0,
+    )
+    view_top_quantile: float = setting(
+        0.995,
+        "the top of the camera's view is this quantile of all slices' upper edges",
+        minimum=0.5,
+        maximum=1.0,
+    )
+    occlusion_cover: float = setting(
+        0.5,
+        "a thing is hidden when nearer things together cover more than this share of its silhouette "
+        "(bearing x elevation, below the top of the view)",
+        minimum=0.0,
+    )
+    table_diameter_m: float = setting(
+        0.45,
+        "objects of a class whose base is above the floor stand on a table this wide (m; DESIGN.md), as "
+        "tall as their base, which hides what is behind it (0: no tables)",
+        minimum=0.0,
+    )
+
+
+def view_top_elevation(problem: GraphProblem, config: DetectionConfig) -> float:
+    """The top of the camera's view (rad), from the slices' upper edges."""
+    if problem.measurement_count == 0:
+        return math.inf
+    return float(np.quantile(problem.measurements[:, 3], config.view_top_quantile))
+
+
+@dataclass(frozen=True)
+class Sight:
+    """How K things appear from N poses: (N, K) bearing, width, elevations of the lower and
+    upper edge and range, and ``in_view`` (valid, wide enough, near enough, below the top of
+    the view), before occlusion."""
+
+    bearing: NDArray[np.float64]
+    width: NDArray[np.float64]
+    bottom: NDArray[np.float64]
+    top: NDArray[np.float64]
+    range_m: NDArray[np.float64]
+    in_view: NDArray[np.bool_]
+
+    def columns(self, index: Sequence[int]) -> Sight:
+        index = np.asarray(index, dtype=np.int64)
+        return Sight(*(getattr(self, f)[:, index] for f in Sight.__dataclass_fields__))
+
+    @staticmethod
+    def join(parts: Sequence[Sight]) -> Sight:
+        return Sight(*(np.concatenate([getattr(p, f) for p in parts], axis=1) for f in Sight.__dataclass_fields__))
+
+
+def sight(
+    problem: GraphProblem,
+    map_T_base: NDArray[np.float64],
+    things: NDArray[np.float64],
+    config: DetectionConfig,
+    view_top_rad: float,
+) -> Sight:
+    """The :class:`Sight` of (K, 5) things (x, y, z_base, diameter, height) from the poses."""
+    things = np.asarray(things, dtype=float).reshape(-1, 5)
+    poses = np.asarray(map_T_base, dtype=float)
+    n, k = len(poses), len(things)
+    if k == 0:
+        empty = np.zeros((n, 0))
+        return Sight(empty, empty, empty, empty, empty, empty.astype(bool))
+    pred = predict_reduced(
+        np.repeat(poses, k, axis=0),
+        np.tile(things[:, :3], (n, 1)),
+        np.tile(things[:, 3:], (n, 1)),
+        problem.mount,
+        jacobians=False,
+    )
+    values = pred.values.reshape(4, n, k)
+    dist = pred.range_m.reshape(n, k)
+    in_view = pred.valid.reshape(n, k) & (values[WIDTH] >= config.min_angular_width_rad)
+    in_view &= (dist <= config.max_range_m) & (values[ELEVATION_BOTTOM] < view_top_rad)
+    # What the camera can see of a thing ends at the top of the view.
+    top = np.minimum(values[ELEVATION_TOP], view_top_rad)
+    return Sight(values[BEARING], values[WIDTH], values[ELEVATION_BOTTOM], top, dist, in_view)
+
+
+def table_sight(
+    problem: GraphProblem,
+    map_T_base: NDArray[np.float64],
+    things: NDArray[np.float64],
+    on_table: NDArray[np.bool_],
+    config: DetectionConfig,
+) -> Sight:
+    """The tables under (K, 5) ``things`` where ``on_table``, column k under thing k: as wide
+    as ``table_diameter_m`` (or the thing, if wider), from the floor to the thing's base.
+    They hide what is behind them but are never in view themselves (they are not detected);
+    a column without a table is infinitely far, so it hides nothing."""
+    things = np.asarray(things, dtype=float).reshape(-1, 5)
+    tables = np.zeros_like(things)
+    tables[:, :2] = things[:, :2]
+    tables[:, 3] = np.maximum(config.table_diameter_m, things[:, 3])
+    tables[:, 4] = things[:, 2]
+    seen = sight(problem, map_T_base, tables, config, math.inf)
+    absent = ~np.asarray(on_table, dtype=bool) | (config.table_diameter_m <= 0.0)
+    return dataclasses.replace(
+        seen,
+        range_m=np.where(absent, np.inf, seen.range_m),
+        in_view=np.zeros_like(seen.in_view),
+    )
+
+
+# The share of a thing's silhouette that nearer things cover is measured on a grid of this
+# many points per side: occluders overlap each other (a table and the object on it, two
+# objects side by side), so their covers do not add up and the union is what counts. A
+# column of the grid is one 16-bit word (bit i: elevation point i covered).
+_COVER_GRID = 16
+_POPCOUNT = np.unpackbits(np.arange(1 << _COVER_GRID, dtype=">u2").view(np.uint8)).reshape(-1, 16).sum(axis=1)
+
+
+def hidden(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:
+    """(N, R) whether nearer things of ``occluders`` together hide each thing of ``rows``
+    where it is in view (False elsewhere): they cover more than ``occlusion_cover`` of its
+    silhouette, the rectangle of its bearing interval and its elevations below the top of the
+    view (a thing does not hide itself: it is not nearer than itself)."""
+    out = np.zeros(rows.in_view.shape, dtype=bool)
+    occluders = occluders.columns(np.flatnonzero(np.isfinite(occluders.range_m).any(axis=0)))
+    if not occluders.bearing.shape[1]:
+        return out
+    # Only the (pose, thing) pairs in view matter: (P, O) against every occluder.
+    pose, row = np.nonzero(rows.in_view)
+    half_width = 0.5 * rows.width[pose, row]
+    bottom, top = rows.bottom[pose, row], rows.top[pose, row]
+    offset = wrap_angle(occluders.bearing[pose] - rows.bearing[pose, row][:, None])
+    occ_half_width = 0.5 * occluders.width[pose]
+    candidate = (
+        (occluders.range_m[pose] < rows.range_m[pose, row][:, None])
+        & (np.abs(offset) < half_width[:, None] + occ_half_width)
+        & (occluders.bottom[pose] < top[:, None])
+        & (occluders.top[pose] > bottom[:, None])
+    )
+    # The (pair, occluder) candidates, few per pair: each pair's grid points against each.
+    pair, occ = np.nonzero(candidate)
+    if not len(pair):
+        return out
+    unit = (np.arange(_COVER_GRID) + 0.5) / _COVER_GRID
+    u = (2.0 * unit - 1.0)[None, :] * half_width[pair, None]
+    v = bottom[pair, None] + unit[None, :] * (top - bottom)[pair, None]
+    p_pose = pose[pair]
+    in_bearing = np.abs(u - offset[pair, occ][:, None]) <= occ_half_width[pair, occ][:, None]
+    in_elevation = (v >= occluders.bottom[p_pose, occ][:, None]) & (v <= occluders.top[p_pose, occ][:, None])
+    elevation_bits = (in_elevation.astype(np.int64) << np.arange(_COVER_GRID)).sum(axis=1)
+    # OR of the candidates' covers per pair: (P, G) words, one per bearing point.
+    covered = np.zeros((len(pose), _COVER_GRID), dtype=np.int64)
+    column_bits = np.where(in_bearing, elevation_bits[:, None], 0)
+    np.bitwise_or.at(covered, pair, column_bits)
+    share = _POPCOUNT[covered].sum(axis=1) / float(_COVER_GRID * _COVER_GRID)
+    out[pose, row] = share > config.occlusion_cover
+    return out
+
+
+def visible(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np.bool_]:
+    """(N, R) whether each thing of ``rows`` is in view and hidden by no nearer ones of ``occluders``."""
+    return rows.in_view & ~hidden(rows, occluders, config)
+
+
+def hit_matrix(problem: GraphProblem, n_poses: int, groups: Sequence[NDArray[np.int64]]) -> NDArray[np.bool_]:
+    """(N, R) whether image n holds a slice of group r (measurement indices)."""
+    hit = np.zeros((n_poses, len(groups)), dtype=bool)
+    for r, group in enumerate(groups):
+        hit[problem.measurement_pose[np.asarray(group, dtype=np.int64)], r] = True
+    return hit
+
+
+@dataclass(frozen=True)
+class Sightings:
+    """K things with their slices, from N poses: the :class:`Sight`, the tables under them
+    (:func:`table_sight`), where the others and the tables hide each one (``hidden``, (N, K))
+    and where each has a slice (``hit``, (N, K))."""
+
+    sight: Sight
+    tables: Sight
+    hidden: NDArray[np.bool_]
+    hit: NDArray[np.bool_]
+
+    @property
+    def missed(self) -> NDArray[np.bool_]:
+        """(N, K) images where a thing should be seen and has no slice."""
+        return self.sight.in_view & ~self.hidden & ~self.hit
+
+    def occluders(self, index: Sequence[int]) -> Sight:
+        """The things of ``index`` and their tables, as occluders of others."""
+        return Sight.join([self.sight.columns(index), self.tables.columns(index)])
+
+
+def sightings(
+    problem: GraphProblem,
+    map_T_base: NDArray[np.float64],
+    things: NDArray[np.float64],
+    groups: Sequence[NDArray[np.int64]],
+    config: DetectionConfig,
+    view_top_rad: float,
+    on_table: NDArray[np.bool_] | None = None,
+) -> Sightings:
+    """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices);
+    ``on_table`` (K,) says which stand on a table (default: none)."""
+    seen = sight(problem, map_T_base, things, config, view_top_rad)
+    k = seen.bearing.shape[1]
+    tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
+    covered = hidden(seen, Sight.join([seen, tables]), config)
+    return Sightings(seen, tables, covered, hit_matrix(problem, len(seen.in_view), groups))
+
+
+def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:
+    """``n_miss log(1 - P_d)``."""
+    return n_miss * math.log1p(-config.probability)
+
+
+def detection_log_likelihood(
+    problem: GraphProblem,
+    map_T_base: NDArray[np.float64],
+    things: NDArray[np.float64],
+    groups: Sequence[NDArray[np.int64]],
+    config: DetectionConfig,
+    view_top_rad: float,
+    on_table: NDArray[np.bool_] | None = None,
+) -> float:
+    """``sum of n_miss log(1 - P_d)`` over ``things`` (K, 5) and their ``groups``
+    (measurement indices; module docstring), ``on_table`` as for :func:`sightings`."""
+    if not config.enabled or not len(groups):
+        return 0.0
+    seen = sightings(problem, map_T_base, things, groups, config, view_top_rad, on_table)
+    return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), config)
