@@ -9,25 +9,28 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
-from objslam_common.camera import DEFAULT_CAMERA
+from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_common.geometry import wrap_angle
+from objslam_common.records import SliceMeasurement
 
-from objslam_detector import DetectedSlice, Detector
+from objslam_detector import Detector
 from tests.objslam_detector.conftest import CATALOG, expected, place, render, scene_of, table_for
 
 DETECTOR = Detector()
 DEG = math.radians(1.0)
 
 
-def detect(image, encoding: str = "rgb8") -> list[DetectedSlice]:
+def detect(image, encoding: str = "rgb8") -> list[SliceMeasurement]:
     return DETECTOR.detect(image, DEFAULT_CAMERA, encoding)
 
 
-def of_label(slices: list[DetectedSlice], label: str) -> list[DetectedSlice]:
+def of_label(slices: list[SliceMeasurement], label: str) -> list[SliceMeasurement]:
     return [s for s in slices if s.label == label]
 
 
-def assert_matches(sl: DetectedSlice, truth, bearing_tol=0.1 * DEG, width_rel=0.03, elevation_tol=0.25 * DEG) -> None:
+def assert_matches(
+    sl: SliceMeasurement, truth, bearing_tol=0.1 * DEG, width_rel=0.03, elevation_tol=0.25 * DEG
+) -> None:
     """Within tolerances, the width's widened to 1.2 px of the image: the renderer does not anti-alias,
     so an edge is only known to the pixel where the pixel grid lines up with it (e.g. bearing 0)."""
     bearing, width, bottom, top = truth.sector

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from objslam_common.camera import DEFAULT_CAMERA
+from objslam_common.cameras.unified import DEFAULT_CAMERA
 
 from objslam_detector import Detector, DetectorInputError, decode_compressed, image_from_buffer
 from objslam_detector.errors import CORRUPT_COMPRESSED, EMPTY_IMAGE, SIZE_MISMATCH, UNSUPPORTED_ENCODING

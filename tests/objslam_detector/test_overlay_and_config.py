@@ -6,10 +6,11 @@ import dataclasses
 import math
 
 import numpy as np
-from objslam_common.camera import DEFAULT_CAMERA
+from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_common.config import default_config_dir, flatten, load_config
+from objslam_common.records import SliceMeasurement
 
-from objslam_detector import DetectedSlice, Detector, DetectorConfig, draw_slices
+from objslam_detector import Detector, DetectorConfig, draw_slices
 from tests.objslam_detector.conftest import place, render, scene_of
 
 
@@ -33,7 +34,7 @@ def test_overlay_outlines_each_slice_without_touching_the_input():
 def test_overlay_labels_each_slice_beside_its_sector():
     r = math.radians
     slices = [
-        DetectedSlice("red", 0.9, r(bearing), r(12.0), r(-25.0), r(-5.0), 0.0, 0.0, 0.0, 0.0, 100)
+        SliceMeasurement("red", 0.9, r(bearing), r(12.0), r(-25.0), r(-5.0), 0.0, 0.0, 0.0, 0.0, 100)
         for bearing in (40.0, -120.0)
     ]
     image = np.full((640, 640, 3), 90, np.uint8)

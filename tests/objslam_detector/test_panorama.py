@@ -7,7 +7,7 @@ import math
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from objslam_common.camera import DEFAULT_CAMERA
+from objslam_common.cameras.unified import DEFAULT_CAMERA
 
 from objslam_detector import PanoramaConfig
 from objslam_detector.blobs import seam_shift

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from objslam_common.camera import DEFAULT_CAMERA, CameraModelError, CameraMount, UnifiedCamera
+from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
+from objslam_common.errors import CameraModelError
+from objslam_common.mount import CameraMount
 
 
 @st.composite

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from objslam_common.camera import CameraMount
 from objslam_common.catalog import load_catalog
+from objslam_common.mount import CameraMount
 
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.problem import build_problem

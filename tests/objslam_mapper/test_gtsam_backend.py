@@ -15,7 +15,8 @@ import gtsam
 import numpy as np
 import pytest
 from objslam_common.catalog import load_catalog
-from objslam_common.config import ConfigError, from_mapping
+from objslam_common.config import from_mapping
+from objslam_common.errors import ConfigError
 from objslam_common.records import ImageSlices
 
 from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig, load_graph_config

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from objslam_common.camera import CameraMount, CameraMounts
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import compose
+from objslam_common.mount import CameraMount, CameraMounts
 
 from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig
 from objslam_mapper.graph.keyframes import offset_slice_variance, select_keyframes

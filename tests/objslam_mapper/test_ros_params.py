@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import pytest
 import rclpy
-from objslam_common.config import ConfigError, setting
+from objslam_common.config import setting
+from objslam_common.errors import ConfigError
 from objslam_common.ros.params import declare_config
 from rclpy.parameter import Parameter
 

@@ -7,9 +7,10 @@ import math
 
 import numpy as np
 import pytest
-from objslam_common.camera import CameraMount
+from objslam_common.mount import CameraMount
+from objslam_common.records import SliceMeasurement
 
-from objslam_detector import DetectedSlice, Detector
+from objslam_detector import Detector
 from objslam_tools.cli import main
 from objslam_tools.detector_eval import (
     DetectorEvaluation,
@@ -58,9 +59,9 @@ def view(object_id: int, bearing_deg: float, width_deg: float = 5.0) -> VisibleO
     return VisibleObject(object_id, "red", r(bearing_deg), r(width_deg), r(-8.0), r(2.0), 3.0, 0.0, True, 15.0)
 
 
-def detection(bearing_deg: float, width_deg: float = 5.0) -> DetectedSlice:
+def detection(bearing_deg: float, width_deg: float = 5.0) -> SliceMeasurement:
     r = math.radians
-    return DetectedSlice("red", 1.0, r(bearing_deg), r(width_deg), r(-8.0), r(2.0), 0, 0, 0, 0, 100)
+    return SliceMeasurement("red", 1.0, r(bearing_deg), r(width_deg), r(-8.0), r(2.0), 0, 0, 0, 0, 100)
 
 
 def test_matching_pairs_neighbours_one_to_one_and_flags_duplicates():
@@ -81,8 +82,8 @@ def test_unmatched_detections_are_split_into_from_a_distractor_and_unexplained()
     distractors = [(poster, *distractor_sector(poster, gt, np.zeros(3)))]
     objects = [view(0, 60.0)]
 
-    def sl(label: str, bearing_deg: float, bottom_deg: float = -3.8, top_deg: float = 3.8) -> DetectedSlice:
-        return DetectedSlice(label, 1.0, r(bearing_deg), r(11.4), r(bottom_deg), r(top_deg), 0, 0, 0, 0, 100)
+    def sl(label: str, bearing_deg: float, bottom_deg: float = -3.8, top_deg: float = 3.8) -> SliceMeasurement:
+        return SliceMeasurement(label, 1.0, r(bearing_deg), r(11.4), r(bottom_deg), r(top_deg), 0, 0, 0, 0, 100)
 
     evaluation = DetectorEvaluation(bag="by hand")
     trouble = score_frame(

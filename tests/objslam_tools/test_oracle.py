@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from objslam_common.camera import CameraMount
+from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, SliceMeasurement
 
 from objslam_mapper.model.slice_model import predict_slices

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from objslam_common.camera import CameraMount
 from objslam_common.catalog import load_catalog
+from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
 from objslam_mapper.graph.problem import build_problem

@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from objslam_common.camera import CameraMount
 from objslam_common.catalog import load_catalog
+from objslam_common.mount import CameraMount
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 

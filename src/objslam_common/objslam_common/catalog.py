@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.config import ConfigError, default_config_dir, read_yaml
+from objslam_common.config import default_config_dir, read_yaml
+from objslam_common.errors import ConfigError
 
 
 @dataclass(frozen=True)

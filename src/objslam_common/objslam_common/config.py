@@ -20,11 +20,9 @@ from typing import Any, TypeVar
 
 import yaml
 
+from objslam_common.errors import ConfigError
+
 T = TypeVar("T")
-
-
-class ConfigError(ValueError):
-    """A configuration file or value that cannot be used."""
 
 
 def setting(default: Any, description: str, *, minimum: float | None = None, maximum: float | None = None) -> Any:

@@ -1,8 +1,9 @@
-"""Typed, immutable input records of the mapper core.
+"""Typed, immutable records that flow between the detector, the mapper and the tools.
 
-The mapper node (or a bag reader) turns ``/odom`` and ``/objslam/slices`` messages into
-these records at the edge; nothing below them knows about ROS. Stamps are integer
-nanoseconds; angles are radians in the camera frame (DESIGN.md, data contract).
+Messages become these records at the edge, by one conversion per message type
+(:mod:`objslam_common.ros.conversions`); nothing below them knows about ROS. Stamps are
+integer nanoseconds; angles are radians in the camera frame (docs/design.md, "Data
+contract").
 """
 
 from __future__ import annotations
@@ -10,9 +11,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 
-class RecordError(ValueError):
-    """An input record with impossible values."""
+from objslam_common.errors import RecordError
 
 
 def _require_finite(record: str, **values: float) -> None:
@@ -40,14 +41,24 @@ class OdometrySample:
         _require_finite("OdometrySample", x_m=self.x_m, y_m=self.y_m, theta_rad=self.theta_rad)
 
 
+def as_float32(value: float) -> float:
+    """``value`` as objslam_msgs/Slice carries it (float32), so a record is the same whether
+    it came over the graph or straight from the detector."""
+    return float(np.float32(value))
+
+
 @dataclass(frozen=True)
 class SliceMeasurement:
-    """One detection: an image slice of class ``label`` (DESIGN.md, messages: Slice).
+    """One detection: the image slice around a blob of class ``label`` (objslam_msgs/Slice).
 
     ``bearing_rad`` is the azimuth of the slice centre, ``angular_width_rad`` its azimuth
     extent, ``elevation_bottom_rad``/``elevation_top_rad`` the elevations of the blob's
-    lower and upper edges, all in the camera frame. The stamp is the image's
-    (:class:`ImageSlices`).
+    lower and upper edges, all in the camera frame (azimuth counter-clockwise from the
+    camera's forward axis, elevation above the horizontal). The ``*_px`` and ``angle_*``
+    fields describe the sector in the original image, for overlays; ``truncated`` says
+    the blob touches another class's blob or the edge of the view, so its extent is
+    probably cut short (its confidence is lowered too). The fields the message carries as
+    float32 are rounded to float32 here. The stamp is the image's (:class:`ImageSlices`).
     """
 
     label: str
@@ -56,6 +67,12 @@ class SliceMeasurement:
     angular_width_rad: float
     elevation_bottom_rad: float
     elevation_top_rad: float
+    radius_inner_px: float = 0.0
+    radius_outer_px: float = 0.0
+    angle_start_rad: float = 0.0
+    angle_end_rad: float = 0.0
+    pixel_count: int = 0
+    truncated: bool = False
 
     def __post_init__(self) -> None:
         _require_finite(
@@ -75,6 +92,8 @@ class SliceMeasurement:
                 f"SliceMeasurement: elevation_top_rad {self.elevation_top_rad} is below "
                 f"elevation_bottom_rad {self.elevation_bottom_rad}"
             )
+        for name in ("confidence", "radius_inner_px", "radius_outer_px", "angle_start_rad", "angle_end_rad"):
+            object.__setattr__(self, name, as_float32(getattr(self, name)))
 
 
 @dataclass(frozen=True)

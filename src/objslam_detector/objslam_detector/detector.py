@@ -2,7 +2,7 @@
 
 CMVision style: per-class colour gates on the panorama, morphological cleaning,
 connected components, size and shape gates; each surviving blob becomes a
-DetectedSlice measured on its silhouette (``measure``).
+SliceMeasurement measured on its silhouette (``measure``).
 """
 
 from __future__ import annotations
@@ -13,9 +13,10 @@ from collections import OrderedDict
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.catalog import Catalog, load_catalog
-from objslam_common.config import ConfigError
+from objslam_common.errors import ConfigError
+from objslam_common.records import SliceMeasurement
 
 from objslam_detector.blobs import Blob, Segmenter, clean, strip
 from objslam_detector.colors import ColorGate, classify, derive_gates
@@ -23,7 +24,6 @@ from objslam_detector.config import DetectorConfig
 from objslam_detector.images import as_color_image, check_size
 from objslam_detector.measure import measure
 from objslam_detector.panorama import Panorama
-from objslam_detector.slices import DetectedSlice
 
 logger = logging.getLogger(__name__)
 
@@ -54,7 +54,7 @@ class Detector:
         """Remap tables of a calibration, built on first use."""
         return self._for_camera(camera)[0]
 
-    def detect(self, image: NDArray, camera: UnifiedCamera, encoding: str = "rgb8") -> list[DetectedSlice]:
+    def detect(self, image: NDArray, camera: UnifiedCamera, encoding: str = "rgb8") -> list[SliceMeasurement]:
         """Slices of one image, in no particular order.
 
         ``image`` is (H, W, C) or (H, W) uint8 in ``encoding`` (rgb8, bgr8, rgba8, bgra8,

@@ -1,5 +1,7 @@
 """Errors of the detector library."""
 
+from objslam_common.errors import ObjslamError
+
 # Why a frame cannot be used, short and fixed: the node counts and rate-limits skipped
 # frames by these. The message says the details, which vary from frame to frame.
 UNSUPPORTED_ENCODING = "unsupported encoding"  # pixel encoding, compressed format or bit depth
@@ -8,7 +10,11 @@ CORRUPT_COMPRESSED = "corrupt compressed data"
 EMPTY_IMAGE = "empty image"
 
 
-class DetectorInputError(ValueError):
+class DetectorError(ObjslamError):
+    """Settings or inputs the detector cannot work with."""
+
+
+class DetectorInputError(DetectorError, ValueError):
     """An image the detector cannot use (bad encoding, size, corrupt data); the node skips it.
 
     ``reason`` is one of the constants above; ``str(error)`` is the one-line detail.

@@ -16,12 +16,12 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import wrap_angle
+from objslam_common.records import SliceMeasurement
 
 from objslam_detector.blobs import Blob, strip
 from objslam_detector.panorama import Panorama
-from objslam_detector.slices import DetectedSlice
 
 MARGIN_PX = 3
 # Below this chroma step (grey levels) between object and surroundings the crossing is noise.
@@ -186,7 +186,7 @@ def measure(
     pano: Panorama,
     truncated: bool,
     truncated_confidence: float,
-) -> DetectedSlice:
+) -> SliceMeasurement:
     """The slice of a blob: full azimuth extent and lowest/highest elevation of its silhouette."""
     m = MARGIN_PX
     row_lo = max(blob.row0 - m, 0)
@@ -209,7 +209,7 @@ def measure(
     angle_start = image_angle(camera, az_start)
     angle_end = angle_start + (image_angle(camera, az_start + width) - angle_start) % _TWO_PI
     confidence = blob.fill_ratio * (truncated_confidence if truncated else 1.0)
-    return DetectedSlice(
+    return SliceMeasurement(
         label=label,
         confidence=float(np.clip(confidence, 0.0, 1.0)),
         bearing_rad=float(wrap_angle(az_start + 0.5 * width)),

@@ -7,16 +7,16 @@ from collections.abc import Iterable, Mapping
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.records import SliceMeasurement
 
 from objslam_detector.images import as_color_image
-from objslam_detector.slices import DetectedSlice
 
 _DEFAULT_RGB = (255, 255, 255)
 _ARC_POINTS = 24
 
 
-def sector_outline(camera: UnifiedCamera, sl: DetectedSlice, points_per_arc: int = _ARC_POINTS) -> NDArray[np.int32]:
+def sector_outline(camera: UnifiedCamera, sl: SliceMeasurement, points_per_arc: int = _ARC_POINTS) -> NDArray[np.int32]:
     """Closed outline (N, 2) in pixels: the lower arc, then the upper arc backwards."""
     half = 0.5 * sl.angular_width_rad
     azimuth = np.linspace(sl.bearing_rad - half, sl.bearing_rad + half, points_per_arc)
@@ -30,7 +30,7 @@ def sector_outline(camera: UnifiedCamera, sl: DetectedSlice, points_per_arc: int
 
 def draw_slices(
     image: NDArray,
-    slices: Iterable[DetectedSlice],
+    slices: Iterable[SliceMeasurement],
     camera: UnifiedCamera,
     encoding: str = "rgb8",
     class_rgb: Mapping[str, tuple[int, int, int]] | None = None,

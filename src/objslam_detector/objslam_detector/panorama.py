@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import wrap_angle
 
 from objslam_detector.config import PanoramaConfig

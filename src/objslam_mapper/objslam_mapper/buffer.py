@@ -20,13 +20,15 @@ from dataclasses import dataclass, field
 
 from objslam_common.records import ImageSlices, OdometrySample
 
+from objslam_mapper.errors import MapperError
+
 logger = logging.getLogger(__name__)
 
 ODOMETRY = "odometry"
 SLICES = "slices"
 
 
-class NothingToBuildError(ValueError):
+class NothingToBuildError(MapperError, ValueError):
     """The buffers do not hold what a map build needs; the message says what is missing."""
 
 

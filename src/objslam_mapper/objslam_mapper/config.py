@@ -12,23 +12,8 @@ import dataclasses
 import os
 from dataclasses import dataclass
 
-from objslam_common.camera import CameraMount
 from objslam_common.config import from_mapping, read_ros_parameters, setting
-
-
-@dataclass(frozen=True)
-class CameraMountConfig:
-    """Where the camera sits on the robot (base_link frame)."""
-
-    height_m: float = setting(0.5, "camera height above the floor (m)", minimum=0.0)
-    offset_x_m: float = setting(0.0, "camera position ahead of the rotation axis (m)")
-    offset_y_m: float = setting(0.0, "camera position left of the rotation axis (m)")
-    yaw_rad: float = setting(0.0, "camera forward axis relative to the robot's (rad, counter-clockwise)")
-
-    def to_mount(self) -> CameraMount:
-        return CameraMount(
-            height_m=self.height_m, offset_x_m=self.offset_x_m, offset_y_m=self.offset_y_m, yaw_rad=self.yaw_rad
-        )
+from objslam_common.mount import CameraMountConfig
 
 
 @dataclass(frozen=True)

@@ -16,12 +16,14 @@ from typing import Any
 
 import numpy as np
 import yaml
-from objslam_common.config import ConfigError, read_yaml
+from objslam_common.config import read_yaml
+
+from objslam_mapper.errors import MapperError
 
 logger = logging.getLogger(__name__)
 
 
-class MapFileError(ConfigError):
+class MapFileError(MapperError, ValueError):
     """A map file that cannot be read or written."""
 
 

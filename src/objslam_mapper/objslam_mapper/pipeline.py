@@ -14,9 +14,10 @@ from dataclasses import dataclass
 
 from objslam_common.catalog import Catalog
 from objslam_common.config import setting
+from objslam_common.mount import CameraMountConfig
 from objslam_common.records import ImageSlices, OdometrySample
 
-from objslam_mapper.config import CameraMountConfig, GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
+from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
 from objslam_mapper.inference.infer import PhaseProgress, SamplerConfig
 from objslam_mapper.inference.infer import build_map as _infer
 from objslam_mapper.map_file import BuiltMap

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import CameraMount
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.geometry import between, compose, wrap_angle
+from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
 from objslam_mapper.config import GraphConfig

@@ -8,7 +8,7 @@ classes stay inside this module. Usage::
     for msg in bag.raw_messages(["/odom"]):     # RawMessage(topic, stamp_ns, data, msgtype), time order
         ...
     odom = bag.read_odometry()                  # PoseTrack: stamps_ns (N,) int64, poses (N, 3)
-    camera = bag.read_camera()                  # objslam_common.camera.UnifiedCamera
+    camera = bag.read_camera()                  # objslam_common.cameras.UnifiedCamera
     for frame in bag.images():                  # ImageFrame(stamp_ns, encoding, data)
         rgb = decode_rgb(frame)                 # (H, W, 3) uint8
 
@@ -28,8 +28,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import CameraModelError, UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.errors import CameraModelError
 from objslam_common.geometry import yaw_from_quaternion
+from objslam_common.ros.conversions import camera_from_info
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 from rosbags.serde import SerdeError
@@ -180,7 +182,8 @@ class Bag:
         except _READ_ERRORS as exc:
             raise UserError(f"bag {self.path}: cannot decode a {raw.msgtype} on {raw.topic}: {exc}") from exc
 
-    def _typed(self, topic: str, msgtype: str) -> Iterator[tuple[RawMessage, Any]]:
+    def typed_messages(self, topic: str, msgtype: str) -> Iterator[tuple[RawMessage, Any]]:
+        """Records of one topic with their deserialized messages (for the message conversions)."""
         self.require_topic(topic, msgtype)
         for reader, raw in self._iterate([topic]):
             yield raw, self._deserialize(reader, raw)
@@ -189,7 +192,7 @@ class Bag:
         """All nav_msgs/Odometry poses of a topic at their header stamps, sorted by stamp."""
         stamps: list[int] = []
         poses: list[tuple[float, float, float]] = []
-        for _, msg in self._typed(topic, ODOMETRY_TYPE):
+        for _, msg in self.typed_messages(topic, ODOMETRY_TYPE):
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
             stamps.append(_stamp_ns(msg.header))
             poses.append((float(p.x), float(p.y), yaw_from_quaternion(q.x, q.y, q.z, q.w)))
@@ -200,9 +203,9 @@ class Bag:
     def read_camera(self, topic: str | None = None) -> UnifiedCamera:
         """The camera model from the first CameraInfo (default topic: /camera/camera_info or the only one)."""
         topic = topic or self._pick_topic([CAMERA_INFO_TOPIC], [CAMERA_INFO_TYPE], "camera info")
-        for _, msg in self._typed(topic, CAMERA_INFO_TYPE):
+        for _, msg in self.typed_messages(topic, CAMERA_INFO_TYPE):
             try:
-                return UnifiedCamera.from_camera_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+                return camera_from_info(msg)
             except CameraModelError as exc:
                 raise UserError(f"bag {self.path}: {topic}: {exc}") from exc
         raise UserError(f"bag {self.path}: topic {topic} has no messages")
@@ -219,7 +222,7 @@ class Bag:
         msgtype = self.require_topic(topic).msgtype
         if msgtype not in (IMAGE_TYPE, COMPRESSED_IMAGE_TYPE):
             raise UserError(f"bag {self.path}: topic {topic} is {msgtype}, not an image")
-        for raw, msg in self._typed(topic, msgtype):
+        for raw, msg in self.typed_messages(topic, msgtype):
             stamp_ns = _stamp_ns(msg.header) or raw.stamp_ns  # an unstamped header falls back to bag time
             if msgtype == IMAGE_TYPE:
                 yield ImageFrame(stamp_ns, msg.encoding, self._raw_pixels(msg, topic))

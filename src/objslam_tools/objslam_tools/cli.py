@@ -15,10 +15,9 @@ import os
 import pkgutil
 import sys
 
-from objslam_common.config import ConfigError
+from objslam_common.errors import ObjslamError
 
 from objslam_tools import commands
-from objslam_tools.errors import UserError
 
 USER_ERROR_EXIT = 2
 
@@ -54,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         return int(args.func(args) or 0)
-    except (UserError, ConfigError) as exc:
+    except ObjslamError as exc:
         print(f"objslam {args.verb}: error: {exc}", file=sys.stderr)
         return USER_ERROR_EXIT
     except KeyboardInterrupt:

@@ -28,11 +28,12 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import wrap_angle
+from objslam_common.records import SliceMeasurement
 from scipy.optimize import linear_sum_assignment
 
-from objslam_detector import DetectedSlice, Detector, DetectorInputError, decode_compressed, draw_slices
+from objslam_detector import Detector, DetectorInputError, decode_compressed, draw_slices
 from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC, ImageFrame, open_bag
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import Distractor, GroundTruth, load_ground_truth
@@ -139,7 +140,7 @@ def is_visible(obj: VisibleObject, options: EvalOptions) -> bool:
     )
 
 
-def _fits(sl: DetectedSlice, obj: VisibleObject, options: EvalOptions) -> float:
+def _fits(sl: SliceMeasurement, obj: VisibleObject, options: EvalOptions) -> float:
     """Matching cost of a detection and an object; inf when they cannot be the same."""
     d_bearing = abs(float(wrap_angle(sl.bearing_rad - obj.bearing_rad)))
     if d_bearing > max(0.5 * (sl.angular_width_rad + obj.angular_width_rad), options.bearing_gate_rad):
@@ -151,7 +152,7 @@ def _fits(sl: DetectedSlice, obj: VisibleObject, options: EvalOptions) -> float:
 
 
 def match(
-    slices: Sequence[DetectedSlice], objects: Sequence[VisibleObject], options: EvalOptions
+    slices: Sequence[SliceMeasurement], objects: Sequence[VisibleObject], options: EvalOptions
 ) -> tuple[list[int | None], list[bool]]:
     """Per slice: the index of its object (or None) and whether it is a duplicate (same label assumed)."""
     cost = np.array([[_fits(s, o, options) for o in objects] for s in slices], dtype=float).reshape(
@@ -183,7 +184,7 @@ def distractor_sector(d: Distractor, gt: GroundTruth, map_T_base: NDArray) -> tu
 
 
 def explained_by_distractor(
-    sl: DetectedSlice, sectors: Iterable[tuple[Distractor, NDArray, NDArray]], options: EvalOptions
+    sl: SliceMeasurement, sectors: Iterable[tuple[Distractor, NDArray, NDArray]], options: EvalOptions
 ) -> bool:
     for d, azimuth, elevation in sectors:
         if d.label != sl.label:
@@ -202,7 +203,7 @@ def explained_by_distractor(
 
 
 def score_frame(
-    slices: Sequence[DetectedSlice],
+    slices: Sequence[SliceMeasurement],
     objects: Sequence[VisibleObject],
     distractors: Sequence[tuple[Distractor, NDArray, NDArray]],
     evaluation: DetectorEvaluation,
@@ -312,11 +313,25 @@ def evaluate_bag(
     return evaluation
 
 
+def _truth_slice(obj: VisibleObject) -> SliceMeasurement:
+    """The ground truth's sector as a slice, to draw (truncated: drawn thin)."""
+    bearing, width, bottom, top = obj.sector
+    return SliceMeasurement(
+        label=obj.label,
+        confidence=1.0,
+        bearing_rad=bearing,
+        angular_width_rad=width,
+        elevation_bottom_rad=bottom,
+        elevation_top_rad=top,
+        truncated=True,
+    )
+
+
 def save_overlay(
     path: Path,
     pixels: NDArray[np.uint8],
     encoding: str,
-    slices: Sequence[DetectedSlice],
+    slices: Sequence[SliceMeasurement],
     objects: Sequence[VisibleObject],
     camera: UnifiedCamera,
     detector: Detector,
@@ -324,9 +339,7 @@ def save_overlay(
     """Detections in class colours, ground truth as thin white sectors."""
     import cv2
 
-    truth = [
-        DetectedSlice(o.label, 1.0, *o.sector, 0.0, 0.0, 0.0, 0.0, 0, truncated=True) for o in objects if o.in_view
-    ]
+    truth = [_truth_slice(o) for o in objects if o.in_view]
     canvas = draw_slices(pixels, truth, camera, encoding)
     canvas = draw_slices(canvas, slices, camera, "rgb8", {c.label: c.color_rgb for c in detector.catalog})
     path.parent.mkdir(parents=True, exist_ok=True)

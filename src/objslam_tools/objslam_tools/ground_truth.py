@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import yaml
 from numpy.typing import NDArray
-from objslam_common.camera import CameraMount
+from objslam_common.mount import CameraMount
 
 from objslam_tools.errors import UserError
 

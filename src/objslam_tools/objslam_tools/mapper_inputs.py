@@ -1,40 +1,30 @@
 """A bag as the mapper's inputs: odometry samples from ``/odom`` and slices from the detector.
 
 This is what the detector and mapper nodes exchange over the graph, computed in one
-process; the conversions match the messages' (the confidence travels as float32), so a
-map built here equals the nodes' map for the same inputs and seed.
+process: odometry goes through the nodes' own conversion, and slices are the records the
+detector node would publish (the record rounds what the message carries as float32), so
+a map built here equals the nodes' map for the same inputs and seed.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-import numpy as np
-from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
+from objslam_common.records import ImageSlices, OdometrySample
+from objslam_common.ros.conversions import odometry_sample
 
 from objslam_detector.detector import Detector
-from objslam_detector.slices import DetectedSlice
-from objslam_tools.bag import ODOM_TOPIC, Bag
+from objslam_tools.bag import ODOM_TOPIC, ODOMETRY_TYPE, Bag
 from objslam_tools.detector_eval import frame_pixels
-
-
-def to_measurement(detected: DetectedSlice) -> SliceMeasurement:
-    return SliceMeasurement(
-        label=detected.label,
-        confidence=float(np.float32(detected.confidence)),  # objslam_msgs/Slice carries float32
-        bearing_rad=float(detected.bearing_rad),
-        angular_width_rad=float(detected.angular_width_rad),
-        elevation_bottom_rad=float(detected.elevation_bottom_rad),
-        elevation_top_rad=float(detected.elevation_top_rad),
-    )
+from objslam_tools.errors import UserError
 
 
 def odometry_samples(bag: Bag, topic: str = ODOM_TOPIC) -> tuple[OdometrySample, ...]:
-    track = bag.read_odometry(topic)
-    return tuple(
-        OdometrySample(int(t), float(x), float(y), float(theta))
-        for t, (x, y, theta) in zip(track.stamps_ns, track.poses, strict=True)
-    )
+    """The odometry of ``topic`` as records, sorted by stamp."""
+    samples = [odometry_sample(msg) for _, msg in bag.typed_messages(topic, ODOMETRY_TYPE)]
+    if not samples:
+        raise UserError(f"bag {bag.path}: topic {topic} has no messages")
+    return tuple(sorted(samples, key=lambda s: s.stamp_ns))
 
 
 def detect_bag(
@@ -47,8 +37,7 @@ def detect_bag(
     images = []
     for k, frame in enumerate(bag.images(topic), start=1):
         pixels, encoding = frame_pixels(frame)
-        slices = detector.detect(pixels, camera, encoding)
-        images.append(ImageSlices(frame.stamp_ns, tuple(to_measurement(s) for s in slices)))
+        images.append(ImageSlices(frame.stamp_ns, tuple(detector.detect(pixels, camera, encoding))))
         if progress is not None:
             progress(k, total)
     return tuple(sorted(images, key=lambda i: i.stamp_ns))

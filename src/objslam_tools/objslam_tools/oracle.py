@@ -44,8 +44,8 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.camera import CameraMount
 from objslam_common.geometry import wrap_angle
+from objslam_common.mount import CameraMount
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 

@@ -23,7 +23,7 @@ _EMPTY_LIST_TYPE = ParameterType.PARAMETER_STRING_ARRAY
 def declare_config(node: Node, config_cls: type[T]) -> T:
     """Declare the parameters of ``config_cls`` on ``node`` and return the validated config.
 
-    Raises objslam_common.config.ConfigError for a value that does not validate.
+    Raises objslam_common.errors.ConfigError for a value that does not validate.
     """
     defaults = config_cls()
     values: dict[str, Any] = {}

@@ -10,7 +10,7 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
-from objslam_common.config import ConfigError
+from objslam_common.errors import ConfigError
 
 SHUTDOWN_POLL_S = 0.5  # longest a shutdown by signal may go unnoticed
 

@@ -18,8 +18,11 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from objslam_common.camera import CameraModelError, UnifiedCamera
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.catalog import load_catalog
+from objslam_common.errors import CameraModelError
+from objslam_common.records import ImageSlices, SliceMeasurement
+from objslam_common.ros.conversions import camera_from_info, slice_array_to_msg, stamp_ns
 from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
 from rclpy.node import Node
@@ -31,30 +34,13 @@ from objslam_detector.detector import Detector
 from objslam_detector.errors import DetectorInputError
 from objslam_detector.images import decode_compressed, image_from_buffer
 from objslam_detector.overlay import draw_slices
-from objslam_detector.slices import DetectedSlice
-from objslam_msgs.msg import Slice, SliceArray
+from objslam_msgs.msg import SliceArray
 
 SLICES_TOPIC = "/objslam/slices"
 DEBUG_IMAGE_TOPIC = "/objslam/detector/debug_image"
 WARN_PERIOD_S = 5.0
 PENDING_IMAGES = 10
 NO_CAMERA_INFO = "no camera info"  # beside the reasons of objslam_detector.errors
-
-
-def slice_to_msg(detected: DetectedSlice) -> Slice:
-    return Slice(
-        label=detected.label,
-        confidence=float(detected.confidence),
-        bearing=float(detected.bearing_rad),
-        angular_width=float(detected.angular_width_rad),
-        elevation_bottom=float(detected.elevation_bottom_rad),
-        elevation_top=float(detected.elevation_top_rad),
-        radius_inner_px=float(detected.radius_inner_px),
-        radius_outer_px=float(detected.radius_outer_px),
-        angle_start_rad=float(detected.angle_start_rad),
-        angle_end_rad=float(detected.angle_end_rad),
-        pixel_count=int(detected.pixel_count),
-    )
 
 
 class DetectorNode(Node):
@@ -96,7 +82,7 @@ class DetectorNode(Node):
 
     def on_camera_info(self, msg: CameraInfo) -> None:
         try:
-            camera = UnifiedCamera.from_camera_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+            camera = camera_from_info(msg)
         except CameraModelError as exc:
             self.get_logger().warn(f"ignoring camera info: {exc}", throttle_duration_sec=WARN_PERIOD_S)
             return
@@ -150,11 +136,12 @@ class DetectorNode(Node):
             self._skip(exc.reason, str(exc))
             return
         self.processed += 1
-        self.slices_pub.publish(SliceArray(header=header, slices=[slice_to_msg(s) for s in slices]))
+        image_slices = ImageSlices(stamp_ns(header), tuple(slices))
+        self.slices_pub.publish(slice_array_to_msg(image_slices, header.frame_id))
         if self.debug_pub is not None:
             self._publish_debug(header, image, encoding, slices)
 
-    def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[DetectedSlice]) -> None:
+    def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[SliceMeasurement]) -> None:
         drawn = draw_slices(image, slices, self.camera, encoding, self.class_rgb)
         msg = Image(
             header=header, height=drawn.shape[0], width=drawn.shape[1], encoding="rgb8", step=drawn.shape[1] * 3

@@ -50,6 +50,8 @@ import scipy.linalg
 import scipy.sparse
 from numpy.typing import NDArray
 
+from objslam_mapper.errors import MapperError
+
 logger = logging.getLogger(__name__)
 
 # A row that determines its own fit almost alone (leverage near 1) says little about its noise;
@@ -64,7 +66,7 @@ OWN_BIAS_SIGNIFICANCE = 4.0
 MIN_VISIBLE = 0.05
 
 
-class ErrorCovarianceError(ValueError):
+class ErrorCovarianceError(MapperError, ValueError):
     """The information matrix the error covariance needs is not positive definite."""
 
 

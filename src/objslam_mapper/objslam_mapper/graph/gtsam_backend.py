@@ -63,6 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 from objslam_common.geometry import wrap_angle
 
 from objslam_mapper.config import SolverConfig
+from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.gauge import GAUGE_DIM, about_trajectory, trajectory_gauge
 from objslam_mapper.graph.normal_equations import (
     AssociationSystem,
@@ -100,7 +101,7 @@ _POSE_SIGN = np.array([-1.0, -1.0, 1.0])
 _OBJECT_COLUMNS = np.array([0, 1, 3, 4, 5])
 
 
-class GtsamBackendError(ValueError):
+class GtsamBackendError(MapperError, ValueError):
     """A request the GTSAM backend cannot serve (unknown drive, bad window)."""
 
 

@@ -9,7 +9,7 @@ then every image once the odometry has travelled ``solver.keyframes.min_travel_m
 turned ``min_turn_rad`` since the last keyframe. Every image keeps its stamp and its pose in
 every output: an image's pose is its keyframe's composed with the odometry from the keyframe
 to it, ``keyframe_T_pose``, and its slices are predicted from the keyframe's pose through
-that offset (:class:`objslam_common.camera.CameraMounts`).
+that offset (:class:`objslam_common.mount.CameraMounts`).
 
 The offset is odometry, not truth: taking it as exact would make a slice seen 4 cm after
 its keyframe as certain as one seen from it. The model's own noise of the odometry over
@@ -51,8 +51,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.camera import CameraMounts
 from objslam_common.geometry import between_rows, compose_rows
+from objslam_common.mount import CameraMounts
 
 from objslam_mapper.config import KeyframeConfig
 from objslam_mapper.graph.problem import GraphProblem, gaussian_log_normalizer, read_only

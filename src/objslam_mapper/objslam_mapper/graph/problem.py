@@ -47,11 +47,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import CameraMount, CameraMounts
 from objslam_common.catalog import Catalog, ObjectClass
+from objslam_common.mount import CameraMount, CameraMounts
 from objslam_common.records import ImageSlices, OdometrySample
 
 from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
+from objslam_mapper.errors import MapperError
 from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 from objslam_mapper.model.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP
@@ -67,7 +68,7 @@ CALIBRATION_DIM = 3  # distance scale, turn scale, turn bias per metre
 LOG_2PI = float(np.log(2.0 * np.pi))
 
 
-class GraphError(ValueError):
+class GraphError(MapperError, ValueError):
     """Inputs that do not make a factor graph (bad groups, no usable poses)."""
 
 

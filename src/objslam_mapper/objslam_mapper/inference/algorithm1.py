@@ -50,10 +50,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from objslam_mapper.errors import MapperError
 from objslam_mapper.map_file import BuiltMap, MappedObject, TrajectoryPose
 
 
-class MapBuildError(ValueError):
+class MapBuildError(MapperError, ValueError):
     """Samples that do not make a map (none, or of different trajectories)."""
 
 

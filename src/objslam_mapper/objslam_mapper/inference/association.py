@@ -17,10 +17,12 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
+from objslam_mapper.errors import MapperError
+
 CLUTTER = -1
 
 
-class AssociationError(ValueError):
+class AssociationError(MapperError, ValueError):
     """An association that is not a valid state for the given tracklets."""
 
 

@@ -41,6 +41,7 @@ from objslam_common.catalog import Catalog
 from objslam_common.records import ImageSlices, OdometrySample
 
 from objslam_mapper.config import GraphConfig
+from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem, build_problem
 from objslam_mapper.graph.solver import GraphSolution
@@ -55,7 +56,7 @@ logger = logging.getLogger(__name__)
 BASELINES = ("none", "greedy")
 
 
-class BaselineError(ValueError):
+class BaselineError(MapperError, ValueError):
     """An unknown baseline or groups that do not make a map."""
 
 

@@ -61,6 +61,7 @@ from numpy.typing import ArrayLike, NDArray
 from objslam_common.config import setting
 from scipy.special import expit
 
+from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
 
 logger = logging.getLogger(__name__)
@@ -109,7 +110,7 @@ class _Choice:
         return math.log(self.weights[self.index[key]] / self.total)
 
 
-class SamplerError(RuntimeError):
+class SamplerError(MapperError, RuntimeError):
     """The chain cannot run (invalid start state, impossible target)."""
 
 

@@ -31,11 +31,12 @@ from objslam_common.geometry import between, interpolate_pose, wrap_angle
 from objslam_common.records import OdometrySample
 
 from objslam_mapper.config import OdometryNoiseConfig
+from objslam_mapper.errors import MapperError
 
 logger = logging.getLogger(__name__)
 
 
-class TrajectoryError(ValueError):
+class TrajectoryError(MapperError, ValueError):
     """Odometry that cannot give poses."""
 
 

@@ -53,8 +53,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.camera import CameraMount
 from objslam_common.geometry import wrap_angle
+from objslam_common.mount import CameraMount
 
 BEARING, WIDTH, ELEVATION_BOTTOM, ELEVATION_TOP = range(4)
 COMPONENTS = ("bearing", "angular_width", "elevation_bottom", "elevation_top")

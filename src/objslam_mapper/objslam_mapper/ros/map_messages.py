@@ -7,6 +7,7 @@ from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from nav_msgs.msg import Path
 from objslam_common.catalog import Catalog
 from objslam_common.geometry import quaternion_from_yaw
+from objslam_common.ros.conversions import time_from_ns
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -19,11 +20,6 @@ REJECTED_NS = "rejected"
 REJECTED_LABELS_NS = "rejected_labels"
 _LABEL_HEIGHT_M = 0.15
 _UNKNOWN_RGB = (128, 128, 128)
-
-
-def time_from_ns(stamp_ns: int) -> Time:
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return Time(sec=sec, nanosec=nanosec)
 
 
 def _color(obj: MappedObject, catalog: Catalog, alpha: float) -> ColorRGBA:

@@ -24,7 +24,8 @@ from pathlib import Path
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from objslam_common.catalog import load_catalog
-from objslam_common.ros.conversions import MessageError, image_slices, odometry_sample
+from objslam_common.errors import MessageError
+from objslam_common.ros.conversions import image_slices, odometry_sample, time_from_ns
 from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -37,7 +38,7 @@ from visualization_msgs.msg import MarkerArray
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
 from objslam_mapper.map_file import BuiltMap, MapFileError, write_map
 from objslam_mapper.pipeline import MapperConfig, build_map
-from objslam_mapper.ros.map_messages import time_from_ns, to_marker_array, to_object_map, to_path
+from objslam_mapper.ros.map_messages import to_marker_array, to_object_map, to_path
 from objslam_msgs.msg import BuildProgress, ObjectMap, SliceArray
 from objslam_msgs.srv import BuildMap
 

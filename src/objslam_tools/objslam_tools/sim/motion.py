@@ -18,8 +18,10 @@ from numpy.typing import NDArray
 from objslam_common.geometry import rotation, wrap_angle
 from scipy.interpolate import CubicSpline
 
+from objslam_tools.errors import ToolsError
 
-class PathError(ValueError):
+
+class PathError(ToolsError, ValueError):
     """Waypoints that do not make a usable path."""
 
 

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.camera import DEFAULT_CAMERA, CameraMount, UnifiedCamera
+from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.geometry import wrap_angle
+from objslam_common.mount import CameraMount
 
 from objslam_tools.sim.scene import POST_RGB, SIGN_POST_RADIUS_M, TABLE_RGB, Scene
 

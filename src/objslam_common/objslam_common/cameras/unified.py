@@ -1,11 +1,11 @@
-"""The central omnidirectional camera: unified (Mei) sphere model and its mount.
+"""The central omnidirectional camera: the unified (Mei) sphere model.
 
-Conventions (DESIGN.md, data contract): the optical axis is vertical and the image
-centre looks straight down. A direction with azimuth ``a`` (counter-clockwise from the
-camera's forward axis) and elevation ``e`` (above the horizontal) is the unit-sphere
-point ``(cos e cos a, cos e sin a, -sin e)``; with ``m = (x_s, y_s) / (z_s + xi)`` the
-pixel is ``u = cx + fx m_x``, ``v = cy - fy m_y``. Radius grows with elevation and the
-horizon is the ring ``r = f / xi``.
+Conventions (docs/design.md, "Cameras and the mount"): the optical axis is vertical and
+the image centre looks straight down. A direction with azimuth ``a`` (counter-clockwise
+from the camera's forward axis) and elevation ``e`` (above the horizontal) is the
+unit-sphere point ``(cos e cos a, cos e sin a, -sin e)``; with
+``m = (x_s, y_s) / (z_s + xi)`` the pixel is ``u = cx + fx m_x``, ``v = cy - fy m_y``.
+Radius grows with elevation and the horizon is the ring ``r = f / xi``.
 """
 
 from __future__ import annotations
@@ -15,11 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from objslam_common.geometry import rotation, wrap_angle
-
-
-class CameraModelError(ValueError):
-    """A calibration that the unified model cannot represent."""
+from objslam_common.errors import CameraModelError
+from objslam_common.geometry import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -106,65 +103,3 @@ class UnifiedCamera:
 
 
 DEFAULT_CAMERA = UnifiedCamera(width_px=640, height_px=640, xi=0.9, fx=170.0, fy=170.0, cx=320.0, cy=320.0)
-
-
-@dataclass(frozen=True)
-class CameraMount:
-    """Where the camera sits on the robot: base_T_camera in the plane plus its height.
-
-    Default: on the robot's rotation axis, 0.5 m above the floor, looking forward.
-    """
-
-    height_m: float = 0.5
-    offset_x_m: float = 0.0
-    offset_y_m: float = 0.0
-    yaw_rad: float = 0.0
-
-    def camera_pose(self, map_T_base: ArrayLike) -> NDArray[np.float64]:
-        """map_T_camera (x, y, yaw) of the camera for a robot pose map_T_base."""
-        p = np.asarray(map_T_base, dtype=float)
-        xy = p[:2] + rotation(p[2]) @ np.array([self.offset_x_m, self.offset_y_m])
-        return np.array([xy[0], xy[1], wrap_angle(p[2] + self.yaw_rad)])
-
-    def direction_to(self, map_T_base: ArrayLike, map_points_xyz: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
-        """Azimuth, elevation (camera frame, rad) and horizontal range (m) of map points."""
-        cam = self.camera_pose(map_T_base)
-        pts = np.atleast_2d(np.asarray(map_points_xyz, dtype=float))
-        dx = pts[:, 0] - cam[0]
-        dy = pts[:, 1] - cam[1]
-        rng = np.hypot(dx, dy)
-        azimuth = wrap_angle(np.arctan2(dy, dx) - cam[2])
-        elevation = np.arctan2(pts[:, 2] - self.height_m, rng)
-        return azimuth, elevation, rng
-
-
-@dataclass(frozen=True, eq=False)
-class CameraMounts:
-    """One camera mount per measurement: ``CameraMount``'s fields, the planar ones as (M,) arrays.
-
-    A slice seen from an image that is not a graph pose (``objslam_mapper.graph.keyframes``)
-    is predicted from the graph pose before it: the camera then sits at
-    ``graph_T_image ∘ base_T_camera`` relative to that pose. The slice model takes this
-    wherever it takes a ``CameraMount`` (the fields broadcast over measurements).
-    """
-
-    height_m: float
-    offset_x_m: NDArray[np.float64]
-    offset_y_m: NDArray[np.float64]
-    yaw_rad: NDArray[np.float64]
-
-    @classmethod
-    def behind(cls, mount: CameraMount, graph_T_base: ArrayLike) -> CameraMounts:
-        """The mounts of cameras on robots at (M, 3) poses ``graph_T_base`` relative to the graph poses."""
-        pose = np.atleast_2d(np.asarray(graph_T_base, dtype=float))
-        cos_t, sin_t = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-        return cls(
-            height_m=mount.height_m,
-            offset_x_m=pose[:, 0] + cos_t * mount.offset_x_m - sin_t * mount.offset_y_m,
-            offset_y_m=pose[:, 1] + sin_t * mount.offset_x_m + cos_t * mount.offset_y_m,
-            yaw_rad=pose[:, 2] + mount.yaw_rad,
-        )
-
-    def take(self, index: ArrayLike) -> CameraMounts:
-        """The mounts of measurements ``index``."""
-        return CameraMounts(self.height_m, self.offset_x_m[index], self.offset_y_m[index], self.yaw_rad[index])
