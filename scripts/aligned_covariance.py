@@ -28,10 +28,10 @@ from objslam_common.catalog import load_catalog
 from objslam_common.config import default_config_dir, load_config
 from scipy.stats import chi2
 
+from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.gauge import object_motion, trajectory_gauge
 from objslam_mapper.graph.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
 from objslam_mapper.graph.solver import solve
-from objslam_mapper.pipeline import MapperConfig
 from objslam_tools.evaluate import align_track, nees_summary
 from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.trajectory import PoseTrack

@@ -32,12 +32,12 @@ from objslam_common.catalog import load_catalog
 from objslam_common.config import default_config_dir, load_config
 from objslam_common.geometry import inverse, transform_points, wrap_angle
 
+from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.error_covariance import _owner_rows
 from objslam_mapper.graph.gauge import GAUGE_DIM, object_motion, trajectory_gauge
 from objslam_mapper.graph.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.graph.solver import GraphSolution, solve
-from objslam_mapper.pipeline import MapperConfig
 from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.sim.motion import OdometryNoise
 from objslam_tools.trajectory import fit_se2, transform_poses

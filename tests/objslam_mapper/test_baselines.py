@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from objslam_common.catalog import load_catalog
 
+from objslam_mapper.config import SamplerConfig
 from objslam_mapper.inference.baselines import (
     BaselineError,
     GreedyOptions,
@@ -14,7 +15,6 @@ from objslam_mapper.inference.baselines import (
     map_of_association,
     no_association,
 )
-from objslam_mapper.inference.infer import SamplerConfig
 from objslam_mapper.inference.tracklets import tracklets_of_problem
 from objslam_mapper.synthetic import SyntheticObject
 from tests.objslam_mapper.association_scenes import GREEN, POSTER_FRAMES, RED_A, problem_of, simulate, with_poster

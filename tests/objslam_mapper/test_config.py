@@ -77,7 +77,7 @@ def test_bundled_mapper_parameter_file_lists_every_parameter_at_its_default(repo
     """config/mapper.yaml is the mapper's documentation: every parameter, at its default."""
     import yaml
 
-    from objslam_mapper.pipeline import MapperConfig
+    from objslam_mapper.config import MapperConfig
 
     path = repo_root / "config" / "mapper.yaml"
     section = yaml.safe_load(path.read_text())["mapper"]["ros__parameters"]

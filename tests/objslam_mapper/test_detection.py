@@ -11,10 +11,9 @@ from hypothesis import strategies as st
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
 
-from objslam_mapper.config import GraphConfig
+from objslam_mapper.config import DetectionConfig, GraphConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.detection import (
-    DetectionConfig,
     Sight,
     detection_log_likelihood,
     hidden,

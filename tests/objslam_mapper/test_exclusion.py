@@ -7,11 +7,11 @@ import dataclasses
 import numpy as np
 import pytest
 
+from objslam_mapper.config import ClutterConfig
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.inference.association import Association
-from objslam_mapper.inference.clutter import ClutterConfig
 from objslam_mapper.inference.exclusion import near_pairs, no_overlap_log_probability, pairs_log_probability
-from objslam_mapper.inference.infer import AssociationTarget
+from objslam_mapper.inference.target import AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import tracklets_of_problem
 
 from .association_scenes import problem_of, simulate
@@ -70,8 +70,8 @@ def test_a_duplicate_on_its_object_pays_for_the_overlap(scene):
     halves = (members[::2], members[1::2])
     cut = [t for k, t in enumerate(chained.tracklets) if k != green]
     cut += [dataclasses.replace(chained.tracklets[green], measurement_indices=tuple(h)) for h in halves]
-    solid = AssociationTarget(problem, cut, ClutterConfig())
-    plain = AssociationTarget(problem, cut, ClutterConfig(), exclusion=False)
+    solid = AssociationTarget(problem, cut, TargetOptions(clutter=ClutterConfig()))
+    plain = AssociationTarget(problem, cut, TargetOptions(clutter=ClutterConfig(), exclusion=False))
     # The other tracklets by their true objects (each red object is seen twice).
     true_object = {int(m): k for k, group in enumerate(run.groups(problem)) for m in group}
     others = [true_object[t.measurement_indices[0]] for t in cut[:-2]]

@@ -9,7 +9,7 @@ from objslam_common.catalog import load_catalog
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.graph.solver import solve
-from objslam_mapper.inference.infer import NO_OBJECT_LOG_EVIDENCE
+from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE
 from objslam_mapper.synthetic import office_run
 
 CATALOG = load_catalog()
@@ -58,8 +58,10 @@ def _state_noise(state, other, scale):
     ids=["exact-screen", "poor-screen", "poor-screen-with-margins-and-floor", "bad-screen-with-a-join-floor"],
 )
 def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_error, margins):
+    from objslam_mapper.config import ScreenConfig
     from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
-    from objslam_mapper.inference.sampler import ExactDistribution, MetropolisHastings
+    from objslam_mapper.inference.chain import MetropolisHastings
+    from objslam_mapper.inference.exact import ExactDistribution
 
     from .test_sampler import random_problem
 
@@ -78,10 +80,12 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
         positions_xy_m=positions,
         tracklet_weights=weights,
         screen=screen,
-        screen_margin=margins[0],
-        screen_relative_margin=margins[1],
-        screen_floor=margins[2],
-        screen_join_floor=margins[3],
+        screen_config=ScreenConfig(
+            margin_nats=margins[0],
+            relative_margin=margins[1],
+            floor=margins[2],
+            join_floor=margins[2] if margins[3] is None else margins[3],
+        ),
     )
     result = sampler.run(Association.of([CLUTTER] * 4), 50_000, 1000, np.random.default_rng(100), keep_trace=False)
     assert exact.total_variation(result.counts) < 0.05
@@ -93,8 +97,10 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
 @pytest.mark.slow
 def test_a_screen_that_ignores_the_reverse_stage_is_caught():
     """Power check: accepting on the screen alone (no second-stage correction) is visibly wrong."""
+    from objslam_mapper.config import ScreenConfig
     from objslam_mapper.inference.association import CLUTTER, Association
-    from objslam_mapper.inference.sampler import ExactDistribution, MetropolisHastings
+    from objslam_mapper.inference.chain import MetropolisHastings
+    from objslam_mapper.inference.exact import ExactDistribution
 
     from .test_sampler import random_problem
 
@@ -113,6 +119,7 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
         positions_xy_m=positions,
         tracklet_weights=weights,
         screen=lambda s, n: scores[n] - scores[s] + _state_noise(s, n, 2.0),
+        screen_config=ScreenConfig(margin_nats=0.0, relative_margin=0.0, floor=0.0, join_floor=0.0),
     )
     result = sampler.run(Association.of([CLUTTER] * 4), 50_000, 1000, np.random.default_rng(100), keep_trace=False)
     assert exact.total_variation(result.counts) > 0.08

@@ -12,12 +12,13 @@ import math
 import gtsam
 import numpy as np
 import pytest
+from objslam_common.config import load_config
 from objslam_common.geometry import between, wrap_angle
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
-from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SolverConfig, load_graph_config
+from objslam_mapper.config import GraphConfig, MapperConfig, OdometryNoiseConfig, SolverConfig
 from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, with_extra_priors
@@ -231,12 +232,10 @@ def test_a_group_mixing_classes_is_refused():
 
 
 def test_graph_config_reads_its_sections_of_the_mapper_file(repo_root, tmp_path):
-    assert load_graph_config(repo_root / "config" / "mapper.yaml") == GraphConfig()
+    assert load_config(MapperConfig, repo_root / "config" / "mapper.yaml", "mapper").graph == GraphConfig()
     custom = tmp_path / "mapper.yaml"
-    custom.write_text(
-        "mapper:\n  ros__parameters:\n    sampler: {samples: 3}\n    slice_noise.bearing_stddev_rad: 0.02\n"
-    )
-    assert load_graph_config(custom).slice_noise.bearing_stddev_rad == 0.02
+    custom.write_text("mapper:\n  ros__parameters:\n    sampler: {seed: 3}\n    slice_noise.bearing_stddev_rad: 0.02\n")
+    assert load_config(MapperConfig, custom, "mapper").graph.slice_noise.bearing_stddev_rad == 0.02
 
 
 # -- MAP -------------------------------------------------------------------------------------

@@ -15,11 +15,11 @@ import gtsam
 import numpy as np
 import pytest
 from objslam_common.catalog import load_catalog
-from objslam_common.config import from_mapping
+from objslam_common.config import from_mapping, load_config
 from objslam_common.errors import ConfigError
 from objslam_common.records import ImageSlices
 
-from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig, load_graph_config
+from objslam_mapper.config import GraphConfig, KeyframeConfig, MapperConfig, SolverConfig
 from objslam_mapper.graph import gtsam_backend
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.gtsam_backend import (
@@ -292,12 +292,12 @@ def test_damping_adds_the_scaled_diagonal(reference):
 
 def test_backend_setting_is_validated_and_read_from_the_mapper_file(repo_root, tmp_path):
     assert SolverConfig().backend == "fast"
-    assert load_graph_config(repo_root / "config" / "mapper.yaml").solver.backend == "fast"
+    assert load_config(MapperConfig, repo_root / "config" / "mapper.yaml", "mapper").graph.solver.backend == "fast"
     with pytest.raises(ConfigError, match="backend"):
         from_mapping(GraphConfig, {"solver": {"backend": "ceres"}})
     custom = tmp_path / "mapper.yaml"
     custom.write_text("mapper:\n  ros__parameters:\n    solver.backend: gtsam\n")
-    assert load_graph_config(custom).solver.backend == "gtsam"
+    assert load_config(MapperConfig, custom, "mapper").graph.solver.backend == "gtsam"
 
 
 def test_solve_with_backend_dispatches_on_the_setting(reference):

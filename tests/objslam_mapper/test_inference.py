@@ -9,22 +9,19 @@ import pytest
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import between, wrap_angle
 
+from objslam_mapper.config import ClutterConfig, DetectionConfig, MapperConfig, MoveConfig, SamplerConfig
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
-from objslam_mapper.inference.clutter import DISTRACTOR, INDEPENDENT, ClutterConfig, ClutterModel
-from objslam_mapper.inference.detection import DetectionConfig, sightings
-from objslam_mapper.inference.infer import (
-    NO_OBJECT_LOG_EVIDENCE,
-    AssociationTarget,
-    SamplerConfig,
-    build_map,
-    clear_start_objects,
-    infer_map,
-    initial_association,
-    recall_start_clutter,
-)
-from objslam_mapper.inference.sampler import ExactDistribution, MetropolisHastings, MoveConfig
+from objslam_mapper.inference.chain import MetropolisHastings
+from objslam_mapper.inference.clutter import DISTRACTOR, INDEPENDENT, ClutterModel
+from objslam_mapper.inference.detection import sightings
+from objslam_mapper.inference.exact import ExactDistribution
+from objslam_mapper.inference.infer import infer_map
+from objslam_mapper.inference.screen import ProposalScreen
+from objslam_mapper.inference.start import clear_start_objects, initial_association, recall_start_clutter
+from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
+from objslam_mapper.pipeline import build_map
 from objslam_mapper.synthetic import SyntheticObject
 
 from .association_scenes import GREEN, POSTER_FRAMES, RED_A, RED_B, problem_of, simulate, with_poster
@@ -76,7 +73,7 @@ def test_target_is_the_graph_evidence_with_distractors_plus_the_clutter_terms(sc
     clutter = ClutterConfig()
     model = ClutterModel(problem, clutter)
     # Every tracklet its own object below: duplicates the no-overlap term would penalize (tested apart).
-    target = AssociationTarget(problem, chained.tracklets, clutter, exclusion=False)
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=clutter, exclusion=False))
     members = [np.asarray(t.measurement_indices) for t in chained.tracklets]
     green = chained.labels.index("green")
     assert target.component(green).kind == DISTRACTOR  # a real object's tracklet fits a static thing
@@ -89,7 +86,7 @@ def test_target_is_the_graph_evidence_with_distractors_plus_the_clutter_terms(sc
     assert len(target.summary(state).objects) == len(objects)
     # Independent false alarms instead (the distractor switched off): outside the graph.
     off = dataclasses.replace(clutter, distractor_weight=0.0)
-    target_off = AssociationTarget(problem, chained.tracklets, off, exclusion=False)
+    target_off = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=off, exclusion=False))
     independent = len(members[green]) * off.log_likelihood_per_slice
     assert target_off(state) == pytest.approx(solve(problem, objects).log_evidence + independent, abs=1e-6)
     all_clutter = Association.of([CLUTTER] * len(members))
@@ -139,7 +136,7 @@ def test_chain_on_the_real_target_matches_its_exact_distribution(scene):
     """Every association of the scene's tracklets solved by the factor graph, then tempered
     (log target / 20) so that more than a handful of states carry mass."""
     _run, problem, chained = scene
-    target = AssociationTarget(problem, chained.tracklets, ClutterConfig(), max_iterations=15)
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=ClutterConfig(), max_iterations=15))
     states = enumerate_associations(chained.labels)
     tempered = {s: target(s) / 20.0 for s in states}
     exact = ExactDistribution.of(states, tempered.__getitem__)
@@ -185,7 +182,9 @@ def test_build_map_runs_the_pipeline_deterministically():
     run = simulate()
     phases = []
     maps = [
-        build_map(run.odometry, run.images, load_catalog(), sampler=QUICK, progress=lambda p, d, t: phases.append(p))
+        build_map(
+            run.odometry, run.images, MapperConfig(sampler=QUICK), load_catalog(), lambda p, d, t: phases.append(p)
+        )
         for _ in range(2)
     ]
     for built in maps:
@@ -236,7 +235,7 @@ def test_a_floor_patch_prefers_clutter_and_starts_there_while_a_short_object_doe
     run = simulate((yellow, patch))
     problem = problem_of(run)
     chained = tracklets_of_problem(problem)
-    target = AssociationTarget(problem, chained.tracklets, ClutterConfig())
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=ClutterConfig()))
     assert set(chained.labels) == {"blue", "yellow"}
     for t, tracklet in enumerate(chained.tracklets):
         alone = solve(problem, [list(tracklet.measurement_indices)]).log_evidence
@@ -263,11 +262,11 @@ def test_a_start_object_made_of_a_patch_seen_twice_is_cleared_to_clutter():
     patch = SyntheticObject("blue", (1.5, -1.2, 0.0), (0.18, 0.003))
     problem = problem_of(simulate((yellow, patch)))
     chained = tracklets_of_problem(problem)
-    target = AssociationTarget(problem, chained.tracklets, ClutterConfig())
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=ClutterConfig()))
     blue = [t for t, label in enumerate(chained.labels) if label == "blue"]
     assert len(blue) >= 2
     joined = Association.of([0 if t in blue else 1 for t in range(len(chained.labels))])
-    cleared, moved = clear_start_objects(target, joined)
+    cleared, moved = clear_start_objects(ProposalScreen(target), joined)
     assert moved == blue
     assert set(cleared.clutter) == set(blue) and cleared.n_objects == 1
     assert target(cleared) > target(joined)
@@ -280,7 +279,9 @@ def test_start_tracklets_left_in_clutter_join_their_object_and_a_poster_stays():
     run = simulate()
     problem = problem_of(run, with_poster(run))
     chained = tracklets_of_problem(problem)
-    target = AssociationTarget(problem, chained.tracklets, ClutterConfig(), detection=QUICK.detection)
+    target = AssociationTarget(
+        problem, chained.tracklets, TargetOptions(clutter=ClutterConfig(), detection=QUICK.detection)
+    )
 
     def owner(tracklet):
         m = tracklet.measurement_indices[0]
@@ -293,11 +294,12 @@ def test_start_tracklets_left_in_clutter_join_their_object_and_a_poster_stays():
     red = [t for t, tr in enumerate(chained.tracklets) if tr.label == "red"]
     left_out = max(red)  # a later look at one of the red objects
     start = Association.of([CLUTTER if t == left_out else a for t, a in enumerate(truth.assignment)])
-    recalled, moved = recall_start_clutter(target, start, max_distance_m=5.0)
+    screen = ProposalScreen(target)
+    recalled, moved = recall_start_clutter(screen, start, max_distance_m=5.0)
     assert moved == [left_out]
     assert recalled == truth and target(recalled) > target(start)
     # Already right: nothing moves.
-    assert recall_start_clutter(target, truth, max_distance_m=5.0) == (truth, [])
+    assert recall_start_clutter(screen, truth, max_distance_m=5.0) == (truth, [])
 
 
 def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
@@ -311,14 +313,17 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
     chained = tracklets_of_problem(problem)
     detection = DetectionConfig(max_range_m=10.0)
     clutter = ClutterConfig(distractor_weight=0.0)  # clutter leaves the graph: nothing hides in its place
-    target = AssociationTarget(problem, chained.tracklets, clutter, exclusion=False, detection=detection)
+    target = AssociationTarget(
+        problem, chained.tracklets, TargetOptions(clutter=clutter, exclusion=False, detection=detection)
+    )
     state = initial_association(chained.tracklets, 0.6)
-    poses, _, estimates = target._reference(state)
+    screen = ProposalScreen(target)
+    poses, _, estimates = screen._reference(state)
     old = target.graph_groups(state)
     kept_estimate = dict(zip(old, estimates, strict=True))
 
     def missed(groups, things):
-        members = [target._measurements(g) for g in groups]
+        members = [target.measurements(g) for g in groups]
         seen = sightings(problem, poses, things, members, detection, target.view_top_rad)
         return dict(zip(groups, seen.missed.sum(axis=0).tolist(), strict=True))
 
@@ -334,17 +339,21 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
     rng = np.random.default_rng(0)
     blocked = [t for t, tr in enumerate(chained.tracklets) if tr.label == "red" and tr.position_xy_m[1] < 0.0]
     moves = [Association.of([CLUTTER if t in blocked else a for t, a in enumerate(state.assignment)])]
-    moves += [p.view.state for p in (sampler.propose(sampler.view(state), rng) for _ in range(30)) if p is not None]
+    moves += [
+        p.view.state
+        for p in (sampler.proposals.propose(sampler.proposals.view(state), rng) for _ in range(30))
+        if p is not None
+    ]
     for new in moves:
         groups = target.graph_groups(new)
         things = np.array(
-            [kept_estimate[g] if g in kept_estimate else target._conditional(state, g)[1] for g in groups]
+            [kept_estimate[g] if g in kept_estimate else screen._conditional(state, g)[1] for g in groups]
         )
         after = missed(groups, things)
         changed = sum(n for g, n in after.items() if g not in before) - sum(
             n for g, n in before.items() if g not in after
         )
-        assert target._screen_detection(state, old, groups) == pytest.approx(changed * log_miss, abs=1e-9)
+        assert screen._screen_detection(state, old, groups) == pytest.approx(changed * log_miss, abs=1e-9)
     # The blind spot: without the blocker the green object misses where it was hidden.
     green = next(g for g in old if chained.labels[g[1][0]] == "green")
     groups = target.graph_groups(moves[0])
@@ -361,7 +370,7 @@ def test_the_target_takes_upper_edges_as_measured_and_the_map_as_lower_bounds():
     measured[cut, 3] -= 0.05
     censored = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
     chained = tracklets_of_problem(censored)
-    target = AssociationTarget(censored, chained.tracklets, ClutterConfig(distractor_weight=0.0))
+    target = AssociationTarget(censored, chained.tracklets, TargetOptions(clutter=ClutterConfig(distractor_weight=0.0)))
     assert not target.problem.measurement_censored_top.any()
     np.testing.assert_array_equal(target.estimation_problem.measurement_censored_top, cut)
     state = initial_association(chained.tracklets, 0.6)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from objslam_mapper.config import SliceNoiseConfig
+from objslam_mapper.config import ClutterConfig, SliceNoiseConfig
 from objslam_mapper.graph.problem import gaussian_log_normalizer
 from objslam_mapper.inference.algorithm1 import (
     MapBuildError,
@@ -18,7 +18,6 @@ from objslam_mapper.inference.algorithm1 import (
     is_spurious,
     location_stddev_m,
 )
-from objslam_mapper.inference.clutter import ClutterConfig
 
 A = frozenset({0, 1, 2, 3})
 B = frozenset({4, 5})

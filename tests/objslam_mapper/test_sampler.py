@@ -15,15 +15,11 @@ from collections import Counter
 import numpy as np
 import pytest
 
+from objslam_mapper.config import MoveConfig
 from objslam_mapper.inference.association import CLUTTER, Association, AssociationError, enumerate_associations
-from objslam_mapper.inference.sampler import (
-    REVERSE_MOVE,
-    CachedLogTarget,
-    ExactDistribution,
-    MetropolisHastings,
-    MoveConfig,
-    SamplerError,
-)
+from objslam_mapper.inference.chain import CachedLogTarget, MetropolisHastings, SamplerError
+from objslam_mapper.inference.exact import ExactDistribution
+from objslam_mapper.inference.moves import REVERSE_MOVE, Proposals
 
 BELL = [1, 1, 2, 5, 15, 52, 203, 877]
 
@@ -99,9 +95,9 @@ def test_proposal_probabilities_are_exact():
     reported: dict[tuple[str, Association, Association], tuple[float, float]] = {}
     frequency: Counter = Counter()
     for state in states:
-        view = sampler.view(state)
+        view = sampler.proposals.view(state)
         for _ in range(draws):
-            p = sampler.propose(view, rng)
+            p = sampler.proposals.propose(view, rng)
             key = (p.kind, state, p.view.state)
             assert p.view.state != state
             assert key not in reported or np.allclose(reported[key], (p.log_q_forward, p.log_q_reverse), atol=1e-12)
@@ -128,9 +124,9 @@ def test_proposals_respect_classes_and_clutter_switch():
     states, scores, positions, _ = random_problem(labels, seed=1, clutter=False)
     sampler = MetropolisHastings(labels, scores.__getitem__, positions_xy_m=positions, allow_clutter=False)
     rng = np.random.default_rng(5)
-    view = sampler.view(states[0])
+    view = sampler.proposals.view(states[0])
     for _ in range(2000):
-        p = sampler.propose(view, rng)
+        p = sampler.proposals.propose(view, rng)
         p.view.state.validate(labels)
         assert not p.view.state.clutter
         view = p.view
@@ -139,12 +135,11 @@ def test_proposals_respect_classes_and_clutter_switch():
 # ---- the chain against the exact distribution -------------------------------------------
 
 
-def run_chain(sampler_cls, labels, clutter, seed, steps):
+def run_chain(proposals_cls, labels, clutter, seed, steps):
     states, scores, positions, weights = random_problem(labels, seed=seed, clutter=clutter)
     exact = ExactDistribution.of(states, scores.__getitem__)
-    sampler = sampler_cls(
-        labels, scores.__getitem__, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter
-    )
+    sampler = MetropolisHastings(labels, scores.__getitem__)
+    sampler.proposals = proposals_cls(labels, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter)
     start = Association.of([CLUTTER] * len(labels) if clutter else range(len(labels)))
     result = sampler.run(start, steps, 1000, np.random.default_rng(100 + seed), keep_trace=False)
     return exact.total_variation(result.counts), result
@@ -163,12 +158,12 @@ CASES = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_chain_visits_states_with_their_exact_probabilities(case):
     labels, clutter, seed, steps = CASES[case]
-    tv, result = run_chain(MetropolisHastings, labels, clutter, seed, steps)
+    tv, result = run_chain(Proposals, labels, clutter, seed, steps)
     assert tv < 0.05
     assert result.distinct_visited == len(enumerate_associations(labels, clutter))
 
 
-class ForgetsReverseDestination(MetropolisHastings):
+class ForgetsReverseDestination(Proposals):
     """Broken on purpose: a move to clutter leaves out the probability that the reverse move
     (from clutter) picks the object the tracklet came from."""
 
@@ -180,7 +175,7 @@ class ForgetsReverseDestination(MetropolisHastings):
         return dataclasses.replace(proposal, log_q_reverse=wrong)
 
 
-class HalvesBipartitions(MetropolisHastings):
+class HalvesBipartitions(Proposals):
     """Broken on purpose: counts each split once per ordered seed pair instead of twice."""
 
     def _log_bipartition(self, members, side_p):

@@ -9,11 +9,10 @@ import pytest
 from objslam_common.catalog import load_catalog
 from objslam_common.records import ImageSlices, SliceMeasurement
 
-from objslam_mapper.config import GraphConfig
+from objslam_mapper.config import GraphConfig, TrackletConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.tracklets import (
     ClassShape,
-    TrackletConfig,
     chain_tracklets,
     class_shapes,
     estimate_range,

@@ -8,9 +8,9 @@ from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
+from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.model.slice_model import predict_slices
-from objslam_mapper.pipeline import MapperConfig
 from objslam_tools.cli import main
 from objslam_tools.evaluate import Reference, score_map
 from objslam_tools.ground_truth import GroundTruth

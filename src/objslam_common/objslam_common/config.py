@@ -16,7 +16,7 @@ import dataclasses
 import os
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 import yaml
 
@@ -25,9 +25,18 @@ from objslam_common.errors import ConfigError
 T = TypeVar("T")
 
 
-def setting(default: Any, description: str, *, minimum: float | None = None, maximum: float | None = None) -> Any:
-    """A dataclass field with a description (and optional bounds) for ROS parameters."""
-    metadata = {"description": description, "minimum": minimum, "maximum": maximum}
+def setting(
+    default: Any,
+    description: str,
+    *,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    expert: bool = False,
+) -> Any:
+    """A dataclass field with its one description (and optional bounds) for ROS parameters,
+    parameter files and the docs. ``expert``: a setting (or a whole section) that only
+    someone who knows the method should change; marked so in config/*.yaml and the docs."""
+    metadata = {"description": description, "minimum": minimum, "maximum": maximum, "expert": expert}
     if isinstance(default, (list, dict)) or dataclasses.is_dataclass(default):
         return dataclasses.field(default_factory=lambda: default, metadata=metadata)
     return dataclasses.field(default=default, metadata=metadata)
@@ -171,15 +180,45 @@ def load_config(cls: type[T], path: str | os.PathLike[str] | None, node_name: st
 
 def flatten(config: Any, prefix: str = "") -> dict[str, tuple[Any, str]]:
     """Dotted parameter name -> (value, description), for declaring ROS parameters."""
-    flat: dict[str, tuple[Any, str]] = {}
+    return {p.name: (p.value, p.description) for p in parameters(config, prefix)}
+
+
+class Parameter(NamedTuple):
+    """One leaf setting of a config, as a parameter file and the docs show it."""
+
+    name: str  # dotted, e.g. "sampler.screen.floor"
+    value: Any  # the config's value (tuples as lists)
+    description: str
+    expert: bool  # the setting or a section above it is marked expert
+    minimum: float | None
+    maximum: float | None
+    section: str  # the description of the section it is in ("" at the top)
+
+
+def parameters(config: Any, prefix: str = "", expert: bool = False, section: str = "") -> list[Parameter]:
+    """Every leaf setting of ``config`` in declaration order (nested dataclasses flattened)."""
+    found: list[Parameter] = []
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
         name = prefix + f.name
+        meta = f.metadata
+        is_expert = expert or bool(meta.get("expert", False))
         if dataclasses.is_dataclass(value):
-            flat.update(flatten(value, prefix=name + "."))
+            found += parameters(value, name + ".", is_expert, meta.get("description", ""))
         else:
-            flat[name] = (list(value) if isinstance(value, tuple) else value, f.metadata.get("description", ""))
-    return flat
+            shown = list(value) if isinstance(value, tuple) else value
+            found.append(
+                Parameter(
+                    name,
+                    shown,
+                    meta.get("description", ""),
+                    is_expert,
+                    meta.get("minimum"),
+                    meta.get("maximum"),
+                    section,
+                )
+            )
+    return found
 
 
 def to_mapping(config: Any) -> dict[str, Any]:

@@ -1,18 +1,22 @@
-"""Settings of the factor-graph model and its solver (the mapper's ``odometry.*``,
-``slice_noise.*``, ``solver.*`` and ``camera_mount.*`` parameters).
+"""Every setting of the mapper, in one place: :class:`MapperConfig` and its sections.
 
-Defaults live in ``config/mapper.yaml`` under ``mapper: ros__parameters:``; the mapper's
-full config dataclass holds these sections beside its own (e.g. ``sampler.*``).
-:func:`load_graph_config` reads just these sections from such a file.
+``MapperConfig`` mirrors the ``mapper: ros__parameters:`` section of ``config/mapper.yaml``
+key for key and is declared as the mapper node's ROS parameters (nested sections become
+dotted names, e.g. ``sampler.screen.floor``). Sections: the camera mount (shared with the
+detector, :mod:`objslam_common.mount`), the factor graph's (``odometry``, ``slice_noise``,
+``solver``), the association sampler's (``sampler`` with its ``moves``, ``tracklets``,
+``clutter``, ``detection`` and ``screen``), the class catalog file, and the node's own
+(``ros``, ignored by ``objslam map``). Each field is described once, here; sections and
+fields meant for experts say so (``expert=True``), and ``config/mapper.yaml`` and
+docs/design.md are generated from these classes (``objslam params``).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import os
+import math
 from dataclasses import dataclass
 
-from objslam_common.config import from_mapping, read_ros_parameters, setting
+from objslam_common.config import setting
 from objslam_common.mount import CameraMountConfig
 
 
@@ -261,12 +265,264 @@ class GraphConfig:
     solver: SolverConfig = setting(SolverConfig(), "known-association solver")
 
 
-GRAPH_SECTIONS = tuple(f.name for f in dataclasses.fields(GraphConfig))
+@dataclass(frozen=True)
+class TrackletConfig:
+    """Gates of the slice chaining (all angles in rad)."""
+
+    bearing_gate_rad: float = setting(
+        0.05, "a slice continues a tracklet if its bearing is within this of the predicted interval", minimum=0.0
+    )
+    elevation_gate_rad: float = setting(
+        0.05, "... and each of its edge elevations within this of the predicted interval", minimum=0.0
+    )
+    width_relative_gate: float = setting(
+        0.3, "... and its angular width within this fraction of the predicted width", minimum=0.0
+    )
+    gate_sigmas: float = setting(
+        4.0, "each gate is at least this many standard deviations of the two slices' noise", minimum=0.0
+    )
+    range_relative_uncertainty: float = setting(
+        0.35, "relative uncertainty of the range estimated from apparent size", minimum=0.0, maximum=0.95
+    )
+    max_frame_gap: int = setting(
+        1, "a tracklet may continue this many images after its last slice (1: in the next image)", minimum=1
+    )
+    max_gap_travel_m: float = setting(
+        0.1, "... or in any later image while the robot has travelled at most this (m)", minimum=0.0
+    )
+    max_gap_turn_rad: float = setting(
+        0.05, "... and turned at most this (rad) since the tracklet's last slice", minimum=0.0
+    )
+    min_length: int = setting(2, "shorter tracklets are dropped (2: drop isolated detections)", minimum=1)
+    min_range_m: float = setting(0.2, "range estimates are clipped to at least this (m)", minimum=0.01)
+    max_range_m: float = setting(20.0, "range estimates are clipped to at most this (m)", minimum=0.1)
 
 
-def load_graph_config(path: str | os.PathLike[str] | None, node_name: str = "mapper") -> GraphConfig:
-    """The graph sections of a node's parameter file; its other sections are left to their owners."""
-    if path is None:
-        return GraphConfig()
-    params = read_ros_parameters(path, node_name)
-    return from_mapping(GraphConfig, {k: v for k, v in params.items() if k in GRAPH_SECTIONS})
+@dataclass(frozen=True)
+class ClutterConfig:
+    """False-alarm model of the detector (see the module docstring)."""
+
+    enabled: bool = setting(True, "let the sampler explain tracklets as false alarms instead of objects")
+    false_alarm_rate: float = setting(
+        0.1, "expected false-alarm slices per image and class (Poisson rate)", minimum=1e-12
+    )
+    max_angular_width_rad: float = setting(1.0, "false-alarm widths are uniform in (0, this] (rad)", minimum=1e-6)
+    min_elevation_rad: float = setting(
+        -math.pi / 2, "false-alarm edge elevations are uniform above this (rad)", minimum=-math.pi / 2
+    )
+    max_elevation_rad: float = setting(
+        1.12, "... and below this (rad; the bundled camera sees up to asin(0.9) = 1.12)", maximum=math.pi / 2
+    )
+    distractor_weight: float = setting(
+        0.5, "share of a static distractor of unknown shape in the clutter mixture (0: off)", minimum=0.0, maximum=1.0
+    )
+    distractor_z_base_stddev_m: float = setting(
+        1.0, "prior stddev of a distractor's base height around its class's (m)", minimum=1e-3
+    )
+    distractor_size_stddev_m: float = setting(
+        0.5, "prior stddev of a distractor's diameter and height around its class's (m)", minimum=1e-3
+    )
+
+    def __post_init__(self) -> None:
+        if self.max_elevation_rad <= self.min_elevation_rad:
+            raise ValueError("max_elevation_rad must be above min_elevation_rad")
+
+    @property
+    def measurement_volume(self) -> float:
+        """V: volume of the slice measurement space, rad^4."""
+        span = self.max_elevation_rad - self.min_elevation_rad
+        return 2.0 * math.pi * self.max_angular_width_rad * 0.5 * span * span
+
+    @property
+    def log_likelihood_per_slice(self) -> float:
+        """log(rate / V): one false-alarm slice's log density (units: log rad^-4)."""
+        return math.log(self.false_alarm_rate) - math.log(self.measurement_volume)
+
+    def log_likelihood(self, slice_count: int) -> float:
+        """log L of a tracklet of ``slice_count`` slices explained as clutter."""
+        return slice_count * self.log_likelihood_per_slice
+
+
+@dataclass(frozen=True)
+class DetectionConfig:
+    """The detector's detection probability and when an object counts as in view."""
+
+    enabled: bool = setting(True, "objects pay for the images where they should be seen and are not")
+    probability: float = setting(
+        0.7, "probability that an object in view is detected in an image", minimum=1e-6, maximum=1.0 - 1e-6
+    )
+    min_angular_width_rad: float = setting(
+        0.035, "an object counts as in view only when its predicted width is at least this (rad)", minimum=0.0
+    )
+    max_range_m: float = setting(
+        10.0,
+        "... and no farther than this (m): beyond it a detector may lose small or dim objects for reasons "
+        "this model does not know, and a real object must not pay for that",
+        minimum=0.0,
+    )
+    view_top_quantile: float = setting(
+        0.995,
+        "the top of the camera's view is this quantile of all slices' upper edges",
+        minimum=0.5,
+        maximum=1.0,
+    )
+    occlusion_cover: float = setting(
+        0.5,
+        "a thing is hidden when nearer things together cover more than this share of its silhouette "
+        "(bearing x elevation, below the top of the view)",
+        minimum=0.0,
+    )
+    table_diameter_m: float = setting(
+        0.45,
+        "objects of a class whose base is above the floor stand on a table this wide (m; DESIGN.md), as "
+        "tall as their base, which hides what is behind it (0: no tables)",
+        minimum=0.0,
+    )
+
+
+@dataclass(frozen=True)
+class MoveConfig:
+    """How the chain proposes new associations (probabilities are normalized over the usable kinds)."""
+
+    merge: float = setting(0.2, "probability of proposing to merge two objects of one class", minimum=0.0)
+    split: float = setting(0.2, "probability of proposing to split one object in two", minimum=0.0)
+    reassign: float = setting(0.3, "probability of moving one tracklet to another or a new object", minimum=0.0)
+    to_clutter: float = setting(0.15, "probability of moving one tracklet to the clutter set", minimum=0.0)
+    from_clutter: float = setting(0.15, "probability of moving a clutter tracklet into an object", minimum=0.0)
+    distance_scale_m: float = setting(
+        1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
+    )
+    weight_floor: float = setting(
+        0.01, "proposal weight of an object however far away (keeps every move possible)", minimum=1e-9
+    )
+    new_object_weight: float = setting(
+        0.2, "proposal weight of 'a new object' (an existing object at distance 0 weighs 1)", minimum=1e-9
+    )
+    split_randomness: float = setting(
+        0.2,
+        "share of a split decided by a coin flip instead of by distance to the two seeds",
+        minimum=1e-3,
+        maximum=1.0,
+    )
+
+    def __post_init__(self) -> None:
+        if self.merge + self.split + self.reassign <= 0.0:
+            raise ValueError("merge, split and reassign probabilities cannot all be zero")
+        if (self.merge > 0.0) != (self.split > 0.0):
+            raise ValueError("merge and split are each other's reverse: both or neither must be > 0")
+        if (self.to_clutter > 0.0) != (self.from_clutter > 0.0):
+            raise ValueError("to_clutter and from_clutter are each other's reverse: both or neither must be > 0")
+
+
+@dataclass(frozen=True)
+class ScreenConfig:
+    """Delayed acceptance: a proposal is first screened on the objects it moves (poses fixed at
+    the current state's MAP), and only one that passes costs a graph solve; the second stage
+    corrects for the screen, so the chain's target stays exact (docs/method.md)."""
+
+    enabled: bool = setting(True, "screen proposals before a graph solve (false: every proposal is solved)")
+    margin_nats: float = setting(
+        5.0, "the screen lets through proposals it judges worse by up to this much (nats)", minimum=0.0
+    )
+    relative_margin: float = setting(
+        0.1, "... or by up to this fraction of its log ratio, whichever is larger", minimum=0.0
+    )
+    floor: float = setting(
+        0.01,
+        "a proposal the screen condemns still gets a graph solve with this probability",
+        minimum=1e-6,
+        maximum=1.0,
+    )
+    join_floor: float = setting(
+        0.1,
+        "... this one when it joins tracklets of two objects (or of clutter and an object): loop closures "
+        "need the poses to move, which the screen cannot see",
+        minimum=1e-6,
+        maximum=1.0,
+    )
+
+
+@dataclass(frozen=True)
+class SamplerConfig:
+    """The association sampler and map building (the mapper's ``sampler.*`` parameters)."""
+
+    samples: int = setting(6000, "MH steps in all, burn-in included (paper: 6000)", minimum=1)
+    burn_in: int = setting(2500, "first steps left out of the map (paper: 2500)", minimum=0)
+    seed: int = setting(1, "random seed of the chain (same seed, same inputs: same map)", minimum=0)
+    moves: MoveConfig = setting(MoveConfig(), "proposal moves")
+    tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets")
+    clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model")
+    spurious_location_stddev_m: float = setting(
+        0.30, "an object whose horizontal location stddev (largest axis) exceeds this is spurious (m)", minimum=0.0
+    )
+    existence_threshold: float = setting(
+        0.5, "identities with P(ID|Z) above this make the map", minimum=0.0, maximum=1.0
+    )
+    report_min_fraction: float = setting(
+        0.05, "other identities held by at least this fraction of samples are reported as rejected", minimum=0.0
+    )
+    identity_overlap: float = setting(
+        0.8,
+        "two sample objects are one identity when each holds at least this share of the other's measurements "
+        "(1: the paper's exact identity)",
+        minimum=0.501,
+        maximum=1.0,
+    )
+    initial_merge_distance_m: float = setting(
+        0.6, "start state: a tracklet joins the nearest same-class object within this distance (m)", minimum=0.0
+    )
+    exclusion: bool = setting(
+        True, "objects are solid: an association pays the posterior probability that two of its objects overlap"
+    )
+    exclusion_floor_nats: float = setting(
+        -60.0,
+        "... each pair at most this much: with exp(floor) the prior does not hold (one object on another)",
+        maximum=0.0,
+    )
+    detection: DetectionConfig = setting(DetectionConfig(), "detection probability and visibility of objects")
+    initial_clutter: bool = setting(
+        True,
+        "start state: a tracklet the target prefers as clutter over a lone object starts in clutter, then start "
+        "objects the target prefers as clutter go there, each clutter tracklet is tried once in its nearest object, "
+        "and the objects are tried as clutter again (false: the plain nearest-neighbour start)",
+    )
+    proposal_max_iterations: int = setting(15, "most solver linearizations per proposed association", minimum=1)
+    solution_cache_size: int = setting(256, "graph solutions kept for warm starts and map building", minimum=1)
+    screen: ScreenConfig = setting(
+        ScreenConfig(), "delayed acceptance: a cheap first look at each proposal", expert=True
+    )
+
+    def __post_init__(self) -> None:
+        if self.burn_in >= self.samples:
+            raise ValueError(f"burn_in ({self.burn_in}) must be smaller than samples ({self.samples})")
+
+
+@dataclass(frozen=True)
+class RosConfig:
+    """The mapper node's topics, buffers and outputs (not used by ``objslam map``)."""
+
+    odom_topic: str = setting("/odom", "wheel odometry (nav_msgs/Odometry, odom -> base_link)")
+    slices_topic: str = setting("/objslam/slices", "detector output (objslam_msgs/SliceArray)")
+    max_buffered_odometry: int = setting(200_000, "odometry messages kept; the oldest go first", minimum=1)
+    max_buffered_images: int = setting(50_000, "slice arrays kept; the oldest go first", minimum=1)
+    subscription_depth: int = setting(1000, "subscription queue depth (reliable): room for bursts", minimum=1)
+    output_dir: str = setting("", "if set, write map.yaml here after each build")
+
+
+@dataclass(frozen=True)
+class MapperConfig:
+    """The mapper's whole configuration: ``objslam map`` and the mapper node read the same."""
+
+    catalog_file: str = setting("", "class catalog file; empty = the bundled config/catalog.yaml")
+    camera_mount: CameraMountConfig = setting(CameraMountConfig(), "camera mount on the robot")
+    odometry: OdometryNoiseConfig = setting(OdometryNoiseConfig(), "odometry factor noise")
+    slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")
+    solver: SolverConfig = setting(SolverConfig(), "known-association solver")
+    sampler: SamplerConfig = setting(SamplerConfig(), "association sampler and map building")
+    ros: RosConfig = setting(RosConfig(), "mapper node topics, buffers and outputs")
+
+    @property
+    def graph(self) -> GraphConfig:
+        return GraphConfig(
+            camera_mount=self.camera_mount, odometry=self.odometry, slice_noise=self.slice_noise, solver=self.solver
+        )

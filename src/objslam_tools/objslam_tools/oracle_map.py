@@ -27,11 +27,11 @@ from objslam_common.records import ImageSlices, OdometrySample
 
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
+from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.problem import GraphProblem, build_problem
 from objslam_mapper.inference.baselines import map_of_groups
 from objslam_mapper.inference.tracklets import tracklets_of_problem
 from objslam_mapper.map_file import BuiltMap
-from objslam_mapper.pipeline import MapperConfig
 from objslam_tools.bag import open_bag
 from objslam_tools.evaluate import Reference, load_reference
 from objslam_tools.ground_truth import GroundTruth

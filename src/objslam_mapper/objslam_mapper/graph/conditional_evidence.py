@@ -16,7 +16,7 @@ calibration (when the graph estimates it) enters only the odometry factors and i
 which no association changes: it is held fixed with the poses and drops out with them.
 
 The sampler uses it as the first stage of a delayed-acceptance Metropolis-Hastings step
-(:mod:`objslam_mapper.inference.sampler`): it is an approximation of the target, never the target.
+(:mod:`objslam_mapper.inference.chain`): it is an approximation of the target, never the target.
 """
 
 from __future__ import annotations

@@ -40,14 +40,15 @@ from numpy.typing import ArrayLike, NDArray
 from objslam_common.catalog import Catalog
 from objslam_common.records import ImageSlices, OdometrySample
 
-from objslam_mapper.config import GraphConfig
+from objslam_mapper.config import GraphConfig, SamplerConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem, build_problem
 from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import build_from_samples
 from objslam_mapper.inference.association import Association
-from objslam_mapper.inference.infer import AssociationTarget, PhaseProgress, SamplerConfig
+from objslam_mapper.inference.diagnostics import PhaseProgress
+from objslam_mapper.inference.target import AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
 from objslam_mapper.map_file import BuiltMap
 
@@ -165,7 +166,7 @@ def map_of_groups(
         )
         for m in members
     ]
-    target = AssociationTarget(problem, objects, config.clutter)
+    target = AssociationTarget(problem, objects, TargetOptions(clutter=config.clutter))
     summary = target.summary(Association.of(range(len(objects))))
     return build_from_samples(
         [(summary, 1)],

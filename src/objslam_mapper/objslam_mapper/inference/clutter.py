@@ -59,56 +59,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.config import setting
 
+from objslam_mapper.config import ClutterConfig
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem, with_extra_priors
-
-
-@dataclass(frozen=True)
-class ClutterConfig:
-    """False-alarm model of the detector (see the module docstring)."""
-
-    enabled: bool = setting(True, "let the sampler explain tracklets as false alarms instead of objects")
-    false_alarm_rate: float = setting(
-        0.1, "expected false-alarm slices per image and class (Poisson rate)", minimum=1e-12
-    )
-    max_angular_width_rad: float = setting(1.0, "false-alarm widths are uniform in (0, this] (rad)", minimum=1e-6)
-    min_elevation_rad: float = setting(
-        -math.pi / 2, "false-alarm edge elevations are uniform above this (rad)", minimum=-math.pi / 2
-    )
-    max_elevation_rad: float = setting(
-        1.12, "... and below this (rad; the bundled camera sees up to asin(0.9) = 1.12)", maximum=math.pi / 2
-    )
-    distractor_weight: float = setting(
-        0.5, "share of a static distractor of unknown shape in the clutter mixture (0: off)", minimum=0.0, maximum=1.0
-    )
-    distractor_z_base_stddev_m: float = setting(
-        1.0, "prior stddev of a distractor's base height around its class's (m)", minimum=1e-3
-    )
-    distractor_size_stddev_m: float = setting(
-        0.5, "prior stddev of a distractor's diameter and height around its class's (m)", minimum=1e-3
-    )
-
-    def __post_init__(self) -> None:
-        if self.max_elevation_rad <= self.min_elevation_rad:
-            raise ValueError("max_elevation_rad must be above min_elevation_rad")
-
-    @property
-    def measurement_volume(self) -> float:
-        """V: volume of the slice measurement space, rad^4."""
-        span = self.max_elevation_rad - self.min_elevation_rad
-        return 2.0 * math.pi * self.max_angular_width_rad * 0.5 * span * span
-
-    @property
-    def log_likelihood_per_slice(self) -> float:
-        """log(rate / V): one false-alarm slice's log density (units: log rad^-4)."""
-        return math.log(self.false_alarm_rate) - math.log(self.measurement_volume)
-
-    def log_likelihood(self, slice_count: int) -> float:
-        """log L of a tracklet of ``slice_count`` slices explained as clutter."""
-        return slice_count * self.log_likelihood_per_slice
-
 
 INDEPENDENT = "independent"
 DISTRACTOR = "distractor"

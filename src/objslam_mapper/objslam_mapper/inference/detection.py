@@ -58,48 +58,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.config import setting
 from objslam_common.geometry import wrap_angle
 
+from objslam_mapper.config import DetectionConfig
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_reduced
-
-
-@dataclass(frozen=True)
-class DetectionConfig:
-    """The detector's detection probability and when an object counts as in view."""
-
-    enabled: bool = setting(True, "objects pay for the images where they should be seen and are not")
-    probability: float = setting(
-        0.7, "probability that an object in view is detected in an image", minimum=1e-6, maximum=1.0 - 1e-6
-    )
-    min_angular_width_rad: float = setting(
-        0.035, "an object counts as in view only when its predicted width is at least this (rad)", minimum=0.0
-    )
-    max_range_m: float = setting(
-        10.0,
-        "... and no farther than this (m): beyond it a detector may lose small or dim objects for reasons "
-        "this model does not know, and a real object must not pay for that",
-        minimum=0.0,
-    )
-    view_top_quantile: float = setting(
-        0.995,
-        "the top of the camera's view is this quantile of all slices' upper edges",
-        minimum=0.5,
-        maximum=1.0,
-    )
-    occlusion_cover: float = setting(
-        0.5,
-        "a thing is hidden when nearer things together cover more than this share of its silhouette "
-        "(bearing x elevation, below the top of the view)",
-        minimum=0.0,
-    )
-    table_diameter_m: float = setting(
-        0.45,
-        "objects of a class whose base is above the floor stand on a table this wide (m; DESIGN.md), as "
-        "tall as their base, which hides what is behind it (0: no tables)",
-        minimum=0.0,
-    )
 
 
 def view_top_elevation(problem: GraphProblem, config: DetectionConfig) -> float:

@@ -36,49 +36,16 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.config import setting
 from objslam_common.geometry import wrap_angle
 from objslam_common.mount import CameraMount
 from scipy.optimize import linear_sum_assignment
 
+from objslam_mapper.config import TrackletConfig
 from objslam_mapper.graph.problem import GraphProblem
 
 logger = logging.getLogger(__name__)
 
 _INFEASIBLE = 1e12
-
-
-@dataclass(frozen=True)
-class TrackletConfig:
-    """Gates of the slice chaining (all angles in rad)."""
-
-    bearing_gate_rad: float = setting(
-        0.05, "a slice continues a tracklet if its bearing is within this of the predicted interval", minimum=0.0
-    )
-    elevation_gate_rad: float = setting(
-        0.05, "... and each of its edge elevations within this of the predicted interval", minimum=0.0
-    )
-    width_relative_gate: float = setting(
-        0.3, "... and its angular width within this fraction of the predicted width", minimum=0.0
-    )
-    gate_sigmas: float = setting(
-        4.0, "each gate is at least this many standard deviations of the two slices' noise", minimum=0.0
-    )
-    range_relative_uncertainty: float = setting(
-        0.35, "relative uncertainty of the range estimated from apparent size", minimum=0.0, maximum=0.95
-    )
-    max_frame_gap: int = setting(
-        1, "a tracklet may continue this many images after its last slice (1: in the next image)", minimum=1
-    )
-    max_gap_travel_m: float = setting(
-        0.1, "... or in any later image while the robot has travelled at most this (m)", minimum=0.0
-    )
-    max_gap_turn_rad: float = setting(
-        0.05, "... and turned at most this (rad) since the tracklet's last slice", minimum=0.0
-    )
-    min_length: int = setting(2, "shorter tracklets are dropped (2: drop isolated detections)", minimum=1)
-    min_range_m: float = setting(0.2, "range estimates are clipped to at least this (m)", minimum=0.01)
-    max_range_m: float = setting(20.0, "range estimates are clipped to at most this (m)", minimum=0.1)
 
 
 @dataclass(frozen=True)

@@ -36,8 +36,9 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
+from objslam_mapper.config import MapperConfig
 from objslam_mapper.map_file import BuiltMap, MapFileError, write_map
-from objslam_mapper.pipeline import MapperConfig, build_map
+from objslam_mapper.pipeline import build_map
 from objslam_mapper.ros.map_messages import to_marker_array, to_object_map, to_path
 from objslam_msgs.msg import BuildProgress, ObjectMap, SliceArray
 from objslam_msgs.srv import BuildMap
@@ -260,14 +261,15 @@ class MapperNode(Node):
         self.objects_pub.publish(objects)
 
     def _write_outputs(self, built: BuiltMap) -> str:
-        """Write map.yaml (and the figures) to ``ros.output_dir``; '' or what was not written, and why.
+        """Write map.yaml to ``ros.output_dir``; '' or what was not written, and why.
 
         A write failure does not fail the build: by then the map is built and published,
         which is what BuildMap promises ("success: false when nothing could be built"). A
         ROS user keeps the map (`objslam echo /objslam/map/objects`) and is told in the
-        response and the log that the files are missing. Failing the build instead would
+        response and the log that the file is missing. Failing the build instead would
         throw away minutes of sampling, and ``output_dir`` cannot be changed without
-        restarting the node, which would lose the buffers too.
+        restarting the node, which would lose the buffers too. Pictures of a written map
+        are ``objslam figures``'s job.
         """
         out_dir = self.config.ros.output_dir
         if not out_dir:
@@ -277,17 +279,6 @@ class MapperNode(Node):
         except Exception as exc:
             return f"the map file was not written: {_reason(exc)}"
         self.get_logger().info(f"map written to {path}")
-        if not self.config.ros.write_figures:
-            return ""
-        try:
-            from objslam_tools.figures import write_figures  # optional: figures need objslam_tools
-        except ImportError:
-            return "write_figures is set but objslam_tools is not installed; no figures"
-        try:
-            paths = write_figures(built, Path(out_dir), catalog=self.catalog, mount=self.config.camera_mount.to_mount())
-        except Exception as exc:
-            return f"the figures were not written: {_reason(exc)}"
-        self.get_logger().info(f"figures written: {', '.join(str(p) for p in paths)}")
         return ""
 
     def summary(self) -> str:

@@ -74,7 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _config(args: argparse.Namespace, samples: int, burn_in: int) -> Any:
     from objslam_common.config import default_config_dir, load_config
 
-    from objslam_mapper.pipeline import MapperConfig
+    from objslam_mapper.config import MapperConfig
 
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
     overrides: dict[str, int] = {"samples": samples, "burn_in": burn_in}
@@ -153,13 +153,14 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
     import numpy as np
 
     from objslam_mapper.graph.gtsam_backend import time_naive_solves
-    from objslam_mapper.inference.infer import AssociationTarget, initial_association
-    from objslam_mapper.inference.sampler import MetropolisHastings
+    from objslam_mapper.inference.chain import MetropolisHastings
+    from objslam_mapper.inference.start import initial_association
+    from objslam_mapper.inference.target import AssociationTarget, TargetOptions
     from objslam_mapper.inference.tracklets import tracklets_of_problem
 
     sampler_cfg = config.sampler
     chained = tracklets_of_problem(problem, sampler_cfg.tracklets)
-    target = AssociationTarget(problem, chained.tracklets, sampler_cfg.clutter)
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=sampler_cfg.clutter))
     sampler = MetropolisHastings(
         chained.labels,
         lambda _state: 0.0,
@@ -171,9 +172,9 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
     start = initial_association(chained.tracklets, sampler_cfg.initial_merge_distance_m)
     rng = np.random.default_rng(0)
     states = [start]
-    view = sampler.view(start)
+    view = sampler.proposals.view(start)
     while len(states) < 20:
-        proposal = sampler.propose(view, rng)
+        proposal = sampler.proposals.propose(view, rng)
         if proposal is None:
             break
         if proposal.view.state.n_objects:

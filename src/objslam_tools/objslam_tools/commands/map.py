@@ -49,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
 
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
+    from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
-    from objslam_mapper.pipeline import MapperConfig, build_map
+    from objslam_mapper.pipeline import build_map
     from objslam_tools.bag import open_bag
     from objslam_tools.errors import UserError
     from objslam_tools.mapper_inputs import detect_bag, odometry_samples

@@ -1,0 +1,361 @@
+"""The proposal distribution over associations: which moves, and their exact probabilities.
+
+The chain (:mod:`objslam_mapper.inference.chain`) walks over states J
+(:mod:`objslam_mapper.inference.association`). Moves, in the spirit of Ranganathan (2008),
+come in reverse pairs so every proposal has an exact Hastings ratio:
+
+- ``merge`` two objects of one class  <->  ``split`` one object in two,
+- ``reassign`` one tracklet to another object or to a new object (its own reverse),
+- ``to_clutter`` a tracklet  <->  ``from_clutter`` a tracklet into an object or a new one.
+
+The move kind is drawn among the kinds possible in the current state (nothing to split,
+no clutter...) in proportion to configured weights, so P(m | J) depends on J. With a move m
+taking J to J' and its reverse m' taking J' back, the acceptance is
+
+    alpha = min(1, pi(J') P(m' | J') q_m'(J' -> J) / (pi(J) P(m | J) q_m(J -> J'))),
+
+which gives detailed balance move pair by move pair, so the chain's stationary law is pi
+(Green, 1995). Reverse proposal probabilities are always computed in the proposed state.
+
+Proposals are geometry aware when rough tracklet positions are given: merges and
+reassignments prefer nearby objects, splits separate tracklets that are far apart. The
+weights only depend on the state and the fixed tracklet positions, and a floor keeps every
+move possible, so the chain stays irreducible and the ratio exact.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_right
+from collections import Counter, OrderedDict
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from itertools import accumulate
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import expit
+
+from objslam_mapper.config import MoveConfig
+from objslam_mapper.errors import MapperError
+from objslam_mapper.inference.association import CLUTTER, Association
+
+MOVE_KINDS = ("merge", "split", "reassign", "to_clutter", "from_clutter")
+REVERSE_MOVE = {
+    "merge": "split",
+    "split": "merge",
+    "reassign": "reassign",
+    "to_clutter": "from_clutter",
+    "from_clutter": "to_clutter",
+}
+_NEW = -2  # destination key: a new object
+_CACHE_SIZE = 20_000  # per-state proposal weights kept
+
+
+def logsumexp(values: NDArray[np.float64]) -> float:
+    m = float(values.max())
+    return m + math.log(float(np.exp(values - m).sum()))
+
+
+class _Choice:
+    """Keys with positive weights: draw one in proportion, or give one's log probability."""
+
+    __slots__ = ("cdf", "index", "keys", "total", "weights")
+
+    def __init__(self, keys: Sequence[Any], weights: Iterable[float]):
+        self.keys = list(keys)
+        self.weights = [float(w) for w in weights]
+        self.cdf = list(accumulate(self.weights))
+        self.total = self.cdf[-1] if self.cdf else 0.0
+        self.index = {k: i for i, k in enumerate(self.keys)}
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def draw(self, rng: np.random.Generator) -> Any:
+        i = bisect_right(self.cdf, rng.random() * self.total)
+        return self.keys[min(i, len(self.keys) - 1)]
+
+    def log_prob(self, key: Any) -> float:
+        return math.log(self.weights[self.index[key]] / self.total)
+
+
+@dataclass
+class StateView:
+    """One state with what the proposals need: object members, classes and centroids."""
+
+    state: Association
+    groups: tuple[tuple[int, ...], ...]
+    labels: list[str]  # per object
+    centroids: NDArray[np.float64]  # (K, 2) per object
+    # Proposal weights, filled on first use: after a rejection the chain proposes from here again.
+    kinds: _Choice | None = None  # the move kinds possible here
+    merges: _Choice | None = None  # keys: object pairs (i, j), i < j, of one class
+    movable: list[int] | None = None  # tracklets in objects that another object (or a new one) can take
+    destinations: dict[int, _Choice] = field(default_factory=dict)  # per tracklet
+
+    @property
+    def assignment(self) -> tuple[int, ...]:
+        return self.state.assignment
+
+    def others_in_object(self, t: int) -> list[int]:
+        return [u for u in self.groups[self.assignment[t]] if u != t]
+
+
+@dataclass(frozen=True)
+class Proposal:
+    kind: str
+    view: StateView
+    log_q_forward: float  # log P(kind | J) q(J -> J'), in the current state
+    log_q_reverse: float  # log P(reverse kind | J') q(J' -> J), in the proposed state
+
+
+class ProposalError(MapperError, ValueError):
+    """Proposal settings or tracklets that cannot make a chain."""
+
+
+class Proposals:
+    """The moves from a state and their probabilities, over a fixed set of tracklets.
+
+    ``positions_xy_m`` (T, 2) are rough tracklet positions used only to shape proposals,
+    ``tracklet_weights`` (T,) weigh them in object centroids (e.g. slices per tracklet).
+    """
+
+    def __init__(
+        self,
+        labels: Sequence[str],
+        moves: MoveConfig | None = None,
+        positions_xy_m: ArrayLike | None = None,
+        tracklet_weights: ArrayLike | None = None,
+        allow_clutter: bool = True,
+    ):
+        self.labels = list(labels)
+        self.moves = moves or MoveConfig()
+        n = len(self.labels)
+        self.positions = np.zeros((n, 2)) if positions_xy_m is None else np.asarray(positions_xy_m, float).reshape(n, 2)
+        self.weights = np.ones(n) if tracklet_weights is None else np.asarray(tracklet_weights, float).reshape(n)
+        if np.any(self.weights <= 0.0):
+            raise ProposalError("tracklet weights must be positive")
+        self.allow_clutter = allow_clutter
+        probs = {kind: float(getattr(self.moves, kind)) for kind in MOVE_KINDS}
+        if not allow_clutter:
+            probs["to_clutter"] = probs["from_clutter"] = 0.0
+        self.kind_weights = {k: p for k, p in probs.items() if p > 0.0}
+        self._inv_two_scale2 = 0.5 / self.moves.distance_scale_m**2
+        self._views: OrderedDict[Association, StateView] = OrderedDict()
+        self._bipartitions: dict[tuple[tuple[int, ...], bytes], float] = {}
+
+    # ---- state views -------------------------------------------------------------
+    def view(self, state: Association) -> StateView:
+        cached = self._views.get(state)
+        if cached is not None:
+            self._views.move_to_end(state)
+            return cached
+        groups = state.groups
+        centroids = np.zeros((len(groups), 2))
+        for j, g in enumerate(groups):
+            w = self.weights[list(g)]
+            centroids[j] = w @ self.positions[list(g)] / w.sum()
+        view = StateView(state, groups, [self.labels[g[0]] for g in groups], centroids)
+        self._views[state] = view
+        if len(self._views) > _CACHE_SIZE:
+            self._views.popitem(last=False)
+        return view
+
+    def _view_of(self, assignment: list[int]) -> StateView:
+        return self.view(Association.of(assignment))
+
+    # ---- proposal weights (shared by forward and reverse computations) -----------
+    def _closeness(self, d2: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.moves.weight_floor + np.exp(-d2 * self._inv_two_scale2)
+
+    def _merges(self, view: StateView) -> _Choice:
+        """Every pair of objects of one class, weighted by the closeness of their centroids."""
+        if view.merges is None:
+            pairs = [
+                (i, j)
+                for i in range(len(view.groups))
+                for j in range(i + 1, len(view.groups))
+                if view.labels[i] == view.labels[j]
+            ]
+            idx = np.array(pairs, dtype=int).reshape(-1, 2)
+            d2 = ((view.centroids[idx[:, 0]] - view.centroids[idx[:, 1]]) ** 2).sum(-1)
+            view.merges = _Choice(pairs, self._closeness(d2))
+        return view.merges
+
+    def _kinds(self, view: StateView) -> _Choice:
+        """The move kinds possible in this state, weighted as configured."""
+        if view.kinds is None:
+            possible = {
+                "merge": len(self._merges(view)) > 0,
+                "split": any(len(g) > 1 for g in view.groups),
+                "reassign": len(self._movable(view)) > 0,
+                "to_clutter": len(view.state.clutter) < view.state.n_tracklets,
+                "from_clutter": len(view.state.clutter) > 0,
+            }
+            kinds = [k for k in self.kind_weights if possible[k]]
+            view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
+        return view.kinds
+
+    def _movable(self, view: StateView) -> list[int]:
+        """Tracklets in an object that can be reassigned: to a new object if they share
+        theirs, else to another object of their class."""
+        if view.movable is None:
+            per_class = Counter(view.labels)
+            view.movable = [
+                t
+                for t, a in enumerate(view.assignment)
+                if a != CLUTTER and (len(view.groups[a]) > 1 or per_class[view.labels[a]] > 1)
+            ]
+        return view.movable
+
+    def _destinations(self, view: StateView, t: int) -> _Choice:
+        """Where tracklet t may go (object indices, or _NEW), weighted by closeness.
+
+        Same for ``reassign`` (t in an object) and ``from_clutter`` (t in clutter): every
+        other object of t's class, plus a new object unless t already is alone in one.
+        """
+        if t not in view.destinations:
+            own = view.assignment[t]
+            keys = [j for j, lab in enumerate(view.labels) if lab == self.labels[t] and j != own]
+            weights = list(self._closeness(((view.centroids[keys] - self.positions[t]) ** 2).sum(-1)))
+            if own == CLUTTER or len(view.groups[own]) > 1:
+                keys.append(_NEW)
+                weights.append(self.moves.new_object_weight)
+            view.destinations[t] = _Choice(keys, weights)
+        return view.destinations[t]
+
+    def _seed_side_probs(self, xy: NDArray[np.float64], d2_a: NDArray, d2_b: NDArray) -> NDArray[np.float64]:
+        """P(member joins seed a's side) from squared distances to the seeds a and b.
+
+        Symmetric in the seeds (swapping them gives 1 - p), which the bipartition sum uses.
+        """
+        mix = self.moves.split_randomness
+        return 0.5 * mix + (1.0 - mix) * expit((d2_b - d2_a) * self._inv_two_scale2)
+
+    def _log_bipartition(self, members: Sequence[int], side_p: NDArray[np.bool_]) -> float:
+        """log q of splitting ``members`` into (side_p, ~side_p), summed over every seed pair.
+
+        The split draws ordered seeds (a, b) uniformly, then sends every other member to
+        a's side with probability p_a(i), else to b's. As p_a is symmetric in the seeds, the
+        unordered bipartition {P, Q} has probability 2 / (n (n - 1)) * sum over a in P,
+        b in Q of prod_{i in P \\ a} p_a(i) prod_{i in Q \\ b} (1 - p_a(i)).
+        """
+        key = (tuple(members), side_p.tobytes())
+        cached = self._bipartitions.get(key)
+        if cached is None:
+            n = len(members)
+            xy = self.positions[list(members)]
+            d2 = ((xy[:, None, :] - xy[None, :, :]) ** 2).sum(-1)
+            p_idx, q_idx = np.flatnonzero(side_p), np.flatnonzero(~side_p)
+            p_a = self._seed_side_probs(xy, d2[p_idx][:, None, :], d2[q_idx][None, :, :])  # (|P|, |Q|, n)
+            log_side = np.where(side_p, np.log(p_a), np.log1p(-p_a))
+            rows, cols = np.arange(len(p_idx))[:, None], np.arange(len(q_idx))[None, :]
+            log_side[rows, cols, p_idx[:, None]] = 0.0  # the seeds are placed, not drawn
+            log_side[rows, cols, q_idx[None, :]] = 0.0
+            cached = math.log(2.0 / (n * (n - 1))) + logsumexp(log_side.sum(-1))
+            if len(self._bipartitions) >= _CACHE_SIZE:
+                self._bipartitions.clear()
+            self._bipartitions[key] = cached
+        return cached
+
+    # ---- moves -------------------------------------------------------------------
+    def _propose_merge(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        merges = self._merges(view)
+        i, j = merges.draw(rng)
+        new = self._view_of([i if a == j else a for a in view.assignment])
+        merged = new.groups[new.assignment[view.groups[i][0]]]
+        side_p = np.array([view.assignment[t] == i for t in merged])
+        n_splittable = sum(len(g) > 1 for g in new.groups)
+        log_f = self._kinds(view).log_prob("merge") + merges.log_prob((i, j))
+        log_r = self._kinds(new).log_prob("split") - math.log(n_splittable) + self._log_bipartition(merged, side_p)
+        return Proposal("merge", new, log_f, log_r)
+
+    def _propose_split(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        splittable = [j for j, g in enumerate(view.groups) if len(g) > 1]
+        members = view.groups[splittable[int(rng.integers(len(splittable)))]]
+        n = len(members)
+        a = int(rng.integers(n))
+        b = int(rng.integers(n - 1))
+        b += b >= a
+        xy = self.positions[list(members)]
+        p_a = self._seed_side_probs(xy, ((xy - xy[a]) ** 2).sum(-1), ((xy - xy[b]) ** 2).sum(-1))
+        side_p = rng.random(n) < p_a
+        side_p[a], side_p[b] = True, False
+        assignment = list(view.assignment)
+        for t, on_p in zip(members, side_p, strict=True):
+            if not on_p:
+                assignment[t] = len(view.groups)
+        new = self._view_of(assignment)
+        pair = tuple(sorted((new.assignment[members[a]], new.assignment[members[b]])))
+        log_f = self._kinds(view).log_prob("split") - math.log(len(splittable))
+        log_f += self._log_bipartition(members, side_p)
+        log_r = self._kinds(new).log_prob("merge") + self._merges(new).log_prob(pair)
+        return Proposal("split", new, log_f, log_r)
+
+    def _move_tracklet(self, view: StateView, t: int, rng: np.random.Generator) -> tuple[StateView, int]:
+        """Move t to a drawn destination: the new view and the destination key."""
+        dest = self._destinations(view, t).draw(rng)
+        assignment = list(view.assignment)
+        assignment[t] = len(view.groups) if dest == _NEW else dest
+        return self._view_of(assignment), dest
+
+    def _way_back(self, view: StateView, new: StateView, t: int) -> int:
+        """The destination key, in ``new``, that returns t to where it was in ``view``."""
+        rest = view.others_in_object(t)
+        return new.assignment[rest[0]] if rest else _NEW
+
+    def _log_reassign(self, view: StateView, t: int, dest: int) -> float:
+        """log q of the state reached by reassigning t to ``dest``, without the kind factor.
+
+        Two tracklets t, u lead to the same state in two ways: merging singletons {t} and
+        {u} (t joins u, or u joins t) and splitting {t, u} (t leaves, or u leaves); q sums
+        both. Every other reassignment reaches its state in exactly one way.
+        """
+        log_q = self._destinations(view, t).log_prob(dest)
+        own = view.groups[view.assignment[t]]
+        twin: tuple[int, int] | None = None
+        if len(own) == 1 and dest != _NEW and len(view.groups[dest]) == 1:
+            twin = (view.groups[dest][0], view.assignment[t])
+        elif len(own) == 2 and dest == _NEW:
+            twin = (own[0] if own[1] == t else own[1], _NEW)
+        if twin is not None:
+            log_q = float(np.logaddexp(log_q, self._destinations(view, twin[0]).log_prob(twin[1])))
+        return log_q - math.log(len(self._movable(view)))
+
+    def _propose_reassign(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        movable = self._movable(view)
+        t = movable[int(rng.integers(len(movable)))]
+        new, dest = self._move_tracklet(view, t, rng)
+        log_f = self._kinds(view).log_prob("reassign") + self._log_reassign(view, t, dest)
+        log_r = self._kinds(new).log_prob("reassign") + self._log_reassign(new, t, self._way_back(view, new, t))
+        return Proposal("reassign", new, log_f, log_r)
+
+    def _propose_to_clutter(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        in_objects = [t for t, a in enumerate(view.assignment) if a != CLUTTER]
+        t = in_objects[int(rng.integers(len(in_objects)))]
+        assignment = list(view.assignment)
+        assignment[t] = CLUTTER
+        new = self._view_of(assignment)
+        log_f = self._kinds(view).log_prob("to_clutter") - math.log(len(in_objects))
+        log_r = self._kinds(new).log_prob("from_clutter") - math.log(len(new.state.clutter))
+        log_r += self._destinations(new, t).log_prob(self._way_back(view, new, t))
+        return Proposal("to_clutter", new, log_f, log_r)
+
+    def _propose_from_clutter(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        clutter = view.state.clutter
+        t = clutter[int(rng.integers(len(clutter)))]
+        new, dest = self._move_tracklet(view, t, rng)
+        n_in_objects = new.state.n_tracklets - len(new.state.clutter)
+        log_f = self._kinds(view).log_prob("from_clutter") - math.log(len(clutter))
+        log_f += self._destinations(view, t).log_prob(dest)
+        log_r = self._kinds(new).log_prob("to_clutter") - math.log(n_in_objects)
+        return Proposal("from_clutter", new, log_f, log_r)
+
+    def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
+        """A proposal from ``view``'s state, or None when no move is possible there."""
+        kinds = self._kinds(view)
+        if not kinds:
+            return None
+        return getattr(self, f"_propose_{kinds.draw(rng)}")(view, rng)

@@ -1,0 +1,297 @@
+r"""The chain's target ``log P(J | Z)``: the value of an association of tracklets.
+
+The target of the chain (paper eq. 25, extended with clutter and solid objects) is, up to
+a constant,
+
+    log P(J | Z) = log P(Z | J) + sum over clutter tracklets tau of log w(tau)
+                   + log P(no two objects of J overlap | J, Z) + log P(J),
+
+where ``log P(Z | J)`` is the Laplace evidence of J's factor graph
+(:func:`objslam_mapper.graph.solver.solve`, every Gaussian normalizer included): its objects
+(one per group of tracklets, with its class priors) and its distractors (each clutter
+tracklet that a static thing of unknown shape explains, with broad priors;
+:mod:`objslam_mapper.inference.clutter`). ``log w(tau)`` is the rest of a clutter tracklet's
+likelihood: the distractor component's weight, or, for a tracklet of independent false
+alarms (outside the graph), that weight times its uniform density. Each slice's factor
+is the max-mixture of :mod:`objslam_mapper.model.outliers` (a merged or cut blob costs a capped
+amount). The no-overlap term is :mod:`objslam_mapper.inference.exclusion` (real objects do not
+share floor space; without it a blob merged with a neighbour becomes a duplicate beside
+the real object), and ``P(J)`` is uniform, as in the paper. Isolated detections dropped
+by the tracklet chaining are in no J.
+
+Each solve is warm-started from the chain's current state (a proposal differs from it by
+one move) and capped at ``proposal_max_iterations`` per phase of the outlier caps: a
+hopeless proposal (a merge of objects metres apart) then costs a few iterations and is
+rejected on the evidence at its last iterate, which is below its optimum. Values are
+cached per state, so the chain sees one fixed target whatever path led to a state.
+
+The screen of proposals (:mod:`objslam_mapper.inference.screen`) and the start state
+(:mod:`objslam_mapper.inference.start`) are built on it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections import OrderedDict
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from objslam_mapper.config import ClutterConfig, DetectionConfig, SamplerConfig
+from objslam_mapper.graph.backends import solve_with_backend
+from objslam_mapper.graph.problem import GraphProblem
+from objslam_mapper.graph.solver import GraphSolution
+from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
+from objslam_mapper.inference.association import Association
+from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component
+from objslam_mapper.inference.detection import Sightings, miss_count_log_likelihood, sightings, view_top_elevation
+from objslam_mapper.inference.diagnostics import Work
+from objslam_mapper.inference.exclusion import no_overlap_log_probability
+from objslam_mapper.inference.tracklets import Tracklet
+
+# The graph of an association without objects is the odometry chain alone: its MAP is the
+# odometry (chi2 = 0), and as the map from poses to (first-pose residual, increments) has a
+# unit Jacobian determinant, the Laplace evidence -cost + sum of normalizers + d/2 log 2 pi
+# - 1/2 log|Lambda| is exactly 0. Computed here rather than solved: such a state needs no graph.
+NO_OBJECT_LOG_EVIDENCE = 0.0
+
+SIGHTINGS_CACHE_SIZE = 1024
+
+# A group of an association's factor graph: an object (its tracklets) or a distractor (one clutter tracklet).
+GraphGroup = tuple[str, tuple[int, ...]]
+OBJECT = "object"
+
+
+class TargetOptions(NamedTuple):
+    """Which terms the target has and how hard it solves (:meth:`of` takes them from the sampler's settings)."""
+
+    clutter: ClutterConfig = ClutterConfig()
+    exclusion: bool = True  # objects are solid
+    exclusion_floor_nats: float = -60.0
+    detection: DetectionConfig = DetectionConfig(enabled=False)  # missed detections
+    max_iterations: int | None = None  # per solve warm-started from the chain's state (None: solver.max_iterations)
+    cache_size: int = 256  # graph solutions kept
+
+    @classmethod
+    def of(cls, config: SamplerConfig) -> TargetOptions:
+        return cls(
+            clutter=config.clutter,
+            exclusion=config.exclusion,
+            exclusion_floor_nats=config.exclusion_floor_nats,
+            detection=config.detection,
+            max_iterations=config.proposal_max_iterations,
+            cache_size=config.solution_cache_size,
+        )
+
+
+def estimates(solution: GraphSolution, count: int | None = None) -> NDArray[np.float64]:
+    """(G, 5) (x, y, z_base, diameter, height) of the solution's first ``count`` groups (default all)."""
+    return np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects[:count]]).reshape(-1, 5)
+
+
+class AssociationTarget:
+    """``log P(J|Z)`` of associations of ``tracklets`` (see the module docstring); callable.
+
+    The costly calls are counted in ``work`` (:class:`~objslam_mapper.inference.diagnostics.Work`).
+    """
+
+    def __init__(
+        self,
+        problem: GraphProblem,
+        tracklets: Sequence[Tracklet],
+        options: TargetOptions | None = None,
+        work: Work | None = None,
+    ):
+        # The target takes every upper edge as measured, those cut by the top of the view too;
+        # the map's estimates (summary) take those as the lower bounds they are. Scored
+        # one-sided, an upper edge no longer tells a cyan poster high on a wall from a cyan
+        # object, nor one object from two beside each other: on the clutter and twins bags the
+        # target then preferred those states (docs/method.md).
+        censored_top = problem.measurement_censored_top
+        problem = dataclasses.replace(problem, measurement_censored_top=np.zeros_like(censored_top))
+        options = options or TargetOptions()
+        self.options = options
+        self.work = work or Work()
+        self.clutter = ClutterModel(problem, options.clutter)
+        self.detection = options.detection
+        self.view_top_rad = view_top_elevation(problem, self.detection)
+        self.problem = self.clutter.problem  # with the distractors' prior rows
+        self.estimation_problem = dataclasses.replace(self.problem, measurement_censored_top=censored_top)
+        self.tracklets = list(tracklets)
+        self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
+        self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
+        self._anchor: GraphSolution | None = None
+        self._components: dict[int, Component] = {}
+        # Per state: how its graph groups appear, and the poses that was computed at.
+        self._sights: OrderedDict[Association, tuple[NDArray, Sightings]] = OrderedDict()
+
+    def component(self, t: int) -> Component:
+        """How tracklet t is explained when it is clutter (one distractor solve, remembered)."""
+        if t not in self._components:
+            start = time.perf_counter()
+            self._components[t] = self.clutter.component(self._members[t])
+            self.work.clutter_solves += 1
+            self.work.clutter_seconds += time.perf_counter() - start
+        return self._components[t]
+
+    def graph_groups(self, state: Association) -> list[GraphGroup]:
+        """The groups of ``state``'s factor graph: its objects in order, then its distractors."""
+        groups: list[GraphGroup] = [(OBJECT, g) for g in state.groups]
+        groups += [(DISTRACTOR, (t,)) for t in state.clutter if self.component(t).kind == DISTRACTOR]
+        return groups
+
+    def measurements(self, group: GraphGroup) -> NDArray[np.int64]:
+        return np.sort(np.concatenate([self._members[t] for t in group[1]]))
+
+    def prior_row(self, group: GraphGroup, members: NDArray[np.int64]) -> int:
+        if group[0] == DISTRACTOR:
+            return self.clutter.distractor_row(int(members[0]))
+        return int(self.problem.measurement_label[members[0]])
+
+    def on_table(self, groups: Sequence[GraphGroup], members: Sequence[NDArray[np.int64]]) -> NDArray[np.bool_]:
+        """Which groups stand on a table: objects of a class whose base is above the floor
+        (DESIGN.md); distractors are posters and patches, which stand on nothing."""
+        return np.array(
+            [
+                g[0] == OBJECT and self.problem.prior_mean[self.prior_row(g, m), 2] > 0.0
+                for g, m in zip(groups, members, strict=True)
+            ],
+            dtype=bool,
+        )
+
+    def groups(self, state: Association) -> list[NDArray[np.int64]]:
+        """Measurement indices of each object of ``state``, in its object order."""
+        return [self.measurements((OBJECT, g)) for g in state.groups]
+
+    def _graph(self, state: Association) -> tuple[list[NDArray[np.int64]], list[int]]:
+        """Measurements and prior rows of every group of ``state``'s graph."""
+        groups = self.graph_groups(state)
+        members = [self.measurements(g) for g in groups]
+        rows = [self.prior_row(g, m) for g, m in zip(groups, members, strict=True)]
+        return members, rows
+
+    def tracklet_clutter_log_likelihood(self, t: int) -> float:
+        """log L_clutter of tracklet t with the odometry alone (its component's)."""
+        return self.component(t).alone_log_likelihood
+
+    def prefers_clutter(self, t: int) -> bool:
+        """Whether tracklet t alone, with the odometry, is likelier clutter than an object of its class.
+
+        That is ``log P(J|Z)`` of the state with t its own object and every other tracklet
+        clutter against the state with all of them clutter, both with the odometry alone
+        (the other tracklets' terms cancel), so neither gets the trajectory the rest of the
+        map would give.
+        """
+        alone = solve_with_backend(self.problem, [self._members[t]]).log_evidence
+        return bool(self.tracklet_clutter_log_likelihood(t) > alone)
+
+    def clutter_log_likelihood(self, state: Association) -> float:
+        """The clutter terms of ``log P(J|Z)`` outside the graph (module docstring of clutter)."""
+        return sum(self.component(t).log_weight for t in state.clutter)
+
+    def solution(self, state: Association) -> GraphSolution:
+        cached = self._solutions.get(state)
+        if cached is not None:
+            self._solutions.move_to_end(state)
+            return cached
+        start = time.perf_counter()
+        max_iterations = None if self._anchor is None else self.options.max_iterations
+        members, rows = self._graph(state)
+        result = solve_with_backend(
+            self.problem, members, warm_start=self._anchor, max_iterations=max_iterations, priors=rows
+        )
+        self.work.solve_seconds += time.perf_counter() - start
+        self.work.solves += 1
+        self._solutions[state] = result
+        if len(self._solutions) > self.options.cache_size:
+            self._solutions.popitem(last=False)
+        return result
+
+    def __call__(self, state: Association) -> float:
+        if not self.graph_groups(state):
+            return NO_OBJECT_LOG_EVIDENCE + self.clutter_log_likelihood(state)
+        solution = self.solution(state)
+        value = solution.log_evidence + self.clutter_log_likelihood(state)
+        if self.options.exclusion and state.n_objects > 1 and np.isfinite(value):
+            value += self.no_overlap_log_probability(state, solution)
+        if self.detection.enabled and np.isfinite(value):
+            value += self.detection_log_likelihood(state, solution)
+        return value
+
+    def detection_log_likelihood(self, state: Association, solution: GraphSolution) -> float:
+        """The detection term of ``state``'s objects and distractors at its MAP (objslam_mapper.inference.detection)."""
+        seen = self.sightings(state, solution.map_T_base, estimates(solution))
+        return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), self.detection)
+
+    def no_overlap_log_probability(self, state: Association, solution: GraphSolution) -> float:
+        """log P(no two objects of ``state`` overlap) at its MAP (objslam_mapper.inference.exclusion)."""
+        members = self.groups(state)
+        rows = [int(self.problem.measurement_label[m[0]]) for m in members]
+        return no_overlap_log_probability(
+            self.problem,
+            solution.map_T_base,
+            estimates(solution, state.n_objects),
+            members,
+            rows,
+            self.options.exclusion_floor_nats,
+        )
+
+    def sightings(self, state: Association, map_T_base: NDArray, estimates: NDArray) -> Sightings:
+        """How ``state``'s graph groups (at ``estimates``) appear from ``map_T_base``.
+
+        The target term (at the state's MAP) and the screens of proposals from the state (at
+        its reference, the same MAP unless the solution was evicted and solved again) share
+        one computation: it is kept per state with the poses it was made at.
+        """
+        cached = self._sights.get(state)
+        if cached is not None and cached[0] is map_T_base:
+            self._sights.move_to_end(state)
+            return cached[1]
+        groups = self.graph_groups(state)
+        members = [self.measurements(g) for g in groups]
+        on_table = self.on_table(groups, members)
+        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad, on_table)
+        self._sights[state] = (map_T_base, seen)
+        if len(self._sights) > SIGHTINGS_CACHE_SIZE:
+            self._sights.popitem(last=False)
+        return seen
+
+    def move_to(self, state: Association) -> None:
+        """The chain is now in ``state``: warm-start later solves from its solution."""
+        self._anchor = self._solutions.get(state, self._anchor)
+
+    def summary(self, state: Association) -> SampleSummary:
+        """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects."""
+        if not self.graph_groups(state):
+            return SampleSummary(map_T_base=np.array(self.problem.odometry_poses), objects=())
+        warm = self._solutions.get(state, self._anchor)
+        started = time.perf_counter()
+        members, rows = self._graph(state)
+        result = solve_with_backend(
+            self.estimation_problem, members, warm_start=warm, with_covariances=True, priors=rows
+        )
+        self.work.marginal_seconds += time.perf_counter() - started
+        self.work.marginal_solves += 1
+        objects = []
+        for est in result.objects[: state.n_objects]:
+            nan3, nan2 = np.full((3, 3), np.nan), np.full((2, 2), np.nan)
+            objects.append(
+                SampleObject(
+                    identity=frozenset(int(m) for m in est.measurement_indices),
+                    label=est.label,
+                    location_m=np.asarray(est.location_m, dtype=float),
+                    size_m=np.asarray(est.size_m, dtype=float),
+                    location_cov=nan3 if est.location_cov is None else np.asarray(est.location_cov, dtype=float),
+                    size_cov=nan2 if est.size_cov is None else np.asarray(est.size_cov, dtype=float),
+                    error_cov=None if est.error_cov is None else np.asarray(est.error_cov, dtype=float),
+                )
+            )
+        return SampleSummary(
+            map_T_base=np.asarray(result.map_T_base, dtype=float),
+            objects=tuple(objects),
+            calibration=np.asarray(result.calibration, dtype=float),
+            calibration_cov=np.asarray(result.calibration_cov, dtype=float),
+        )
