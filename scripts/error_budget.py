@@ -33,10 +33,14 @@ from objslam_common.config import default_config_dir, load_config
 from objslam_common.geometry import inverse, transform_points, wrap_angle
 
 from objslam_mapper.config import MapperConfig
+from objslam_mapper.graph.covariance import noise_groups, prior_scale
 from objslam_mapper.graph.error_covariance import _owner_rows
+from objslam_mapper.graph.factorize import information_matrix
 from objslam_mapper.graph.gauge import GAUGE_DIM, object_motion, trajectory_gauge
-from objslam_mapper.graph.normal_equations import OBJECT_DIM, POSE_DIM, AssociationSystem, cap_schedule, layout_of
-from objslam_mapper.graph.problem import GraphProblem
+from objslam_mapper.graph.keyframes import keyframes_of
+from objslam_mapper.graph.layout import layout_of
+from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
+from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.graph.solver import GraphSolution, solve
 from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.sim.motion import OdometryNoise
@@ -64,7 +68,7 @@ def error_budget(
     ``truth`` is (poses (N, 3), objects (K, 5), calibration (C,)) in any frame: it is
     taken into the map's by the least-squares fit of the trajectories.
     """
-    keyframes = problem.keyframes
+    keyframes = keyframes_of(problem)
     if keyframes.problem.pose_count != problem.pose_count:
         raise ValueError("the budget needs one graph pose per image (solver.keyframes.enabled: false)")
     layout = layout_of(problem, groups)
@@ -75,9 +79,9 @@ def error_budget(
     system.cap_scale = cap_schedule(problem, layout, poses, objects, True)[-1]
     shares = problem.solver.error_covariance.bias_shares()
     kept = system.inlier_slices(poses, objects)  # the slices the MAP kept (within their caps there)
-    map_information = system.information_matrix(system.linearize(poses, objects, calib))
+    map_information = information_matrix(system, system.linearize(poses, objects, calib))
     priors = map_information - sum(
-        (g.jacobian.T @ g.jacobian).toarray() for g in system.noise_groups(poses, objects, calib, shares, kept)
+        (g.jacobian.T @ g.jacobian).toarray() for g in noise_groups(system, poses, objects, calib, shares, kept)
     )
 
     true_poses, true_objects, true_calib = (np.array(t, dtype=float) for t in truth)
@@ -87,7 +91,7 @@ def error_budget(
 
     # Linearized at the truth: the odometry calibration enters bilinearly, and along its weak
     # directions the curvature at the MAP, a standard deviation away, predicts the error poorly.
-    truth_groups = system.noise_groups(true_poses, true_objects, true_calib, shares, kept)
+    truth_groups = noise_groups(system, true_poses, true_objects, true_calib, shares, kept)
     covariance = np.linalg.inv(priors + sum((g.jacobian.T @ g.jacobian).toarray() for g in truth_groups))
 
     k, split = system.n_objects, POSE_DIM * system.n_poses
@@ -133,7 +137,7 @@ def error_budget(
         offsets[-len(calib) :] = true_calib / problem.calibration_prior_stddev**2
     # Each prior's information scaled to the spread of the truth about its mean, as the map's
     # error covariance counts it (objslam_mapper.graph.error_covariance).
-    counted = np.diag(priors) * system.prior_scale() ** 2
+    counted = np.diag(priors) * prior_scale(system) ** 2
     calibration_columns = np.arange(split + OBJECT_DIM * k, system.dimension)
     for name, index in (
         ("prior base height", split + OBJECT_DIM * np.arange(k) + Z),

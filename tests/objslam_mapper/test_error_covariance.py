@@ -14,6 +14,8 @@ from hypothesis import strategies as st
 from scipy.stats import chi2
 
 from objslam_mapper.config import ErrorCovarianceConfig, GraphConfig
+from objslam_mapper.graph import solver as solver_module
+from objslam_mapper.graph.covariance import noise_groups, object_error_covariance_about_trajectory
 from objslam_mapper.graph.error_covariance import (
     ErrorCovarianceError,
     NoiseGroup,
@@ -22,7 +24,10 @@ from objslam_mapper.graph.error_covariance import (
     row_leverages,
     white_weights,
 )
-from objslam_mapper.graph.normal_equations import AssociationSystem, cap_schedule, layout_of
+from objslam_mapper.graph.factorize import information_matrix
+from objslam_mapper.graph.keyframes import keyframes_of
+from objslam_mapper.graph.layout import layout_of
+from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, build_problem
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, simulate_run
@@ -248,7 +253,7 @@ def solved():
 def test_noise_groups_and_the_priors_make_up_the_information(solved):
     problem, _, system, state = solved
     lin = system.linearize(*state)
-    groups = system.noise_groups(*state, ErrorCovarianceConfig().bias_shares())
+    groups = noise_groups(system, *state, ErrorCovarianceConfig().bias_shares())
     assert [g.name for g in groups] == [
         "bearing",
         "angular_width",
@@ -257,7 +262,7 @@ def test_noise_groups_and_the_priors_make_up_the_information(solved):
         "odometry_translation",
         "odometry_turn",
     ]
-    information = system.information_matrix(lin)
+    information = information_matrix(system, lin)
     rest = information - sum((g.jacobian.T @ g.jacobian).toarray() for g in groups)
     # What is left is the priors': objects' class priors, the first pose's, the calibration's (all diagonal).
     np.testing.assert_allclose(rest - np.diag(np.diag(rest)), 0.0, atol=1e-6 * np.abs(information).max())
@@ -281,10 +286,10 @@ def test_noise_groups_and_the_priors_make_up_the_information(solved):
 def test_slice_rows_know_their_object_and_share(solved):
     _, _, system, state = solved
     shares = (0.1, 0.2, 0.3, 0.4)
-    for share, group in zip(shares, system.noise_groups(*state, shares)[:4], strict=False):
+    for share, group in zip(shares, noise_groups(system, *state, shares)[:4], strict=False):
         assert group.bias_share == share
         np.testing.assert_array_equal(group.owner, system.layout.object_of)  # no slice capped in this run
-    assert all(g.owner is None for g in system.noise_groups(*state, shares)[4:])
+    assert all(g.owner is None for g in noise_groups(system, *state, shares)[4:])
 
 
 def test_noise_groups_keep_the_slices_they_are_told(solved):
@@ -294,7 +299,7 @@ def test_noise_groups_keep_the_slices_they_are_told(solved):
     kept = system.inlier_slices(*state[:2])
     assert kept.all()  # no slice capped in this run
     kept[[0, 5]] = False
-    default, told = system.noise_groups(*state, shares), system.noise_groups(*state, shares, kept)
+    default, told = noise_groups(system, *state, shares), noise_groups(system, *state, shares, kept)
     for full, fewer in zip(default[:4], told[:4], strict=True):
         np.testing.assert_array_equal(fewer.residual, full.residual[kept])
         np.testing.assert_array_equal(fewer.owner, full.owner[kept])
@@ -305,10 +310,10 @@ def test_noise_groups_keep_the_slices_they_are_told(solved):
 def test_the_posterior_rows_are_the_solvers_covariances_about_the_trajectory(solved):
     problem, solution, system, state = solved
     lin = system.linearize(*state)
-    weights = problem.keyframes.images_per_keyframe
-    result = system.object_error_covariance_about_trajectory(lin, state, weights, (0.0,) * 4)
-    reported = system.object_error_covariance_about_trajectory(
-        lin, state, weights, CONFIG.solver.error_covariance.bias_shares()
+    weights = keyframes_of(problem).images_per_keyframe
+    result = object_error_covariance_about_trajectory(system, lin, state, weights, (0.0,) * 4)
+    reported = object_error_covariance_about_trajectory(
+        system, lin, state, weights, CONFIG.solver.error_covariance.bias_shares()
     )
     for j, obj in enumerate(solution.objects):
         np.testing.assert_allclose(result.posterior[j, :3, :3], obj.location_cov, rtol=1e-6, atol=1e-12)
@@ -319,15 +324,15 @@ def test_the_posterior_rows_are_the_solvers_covariances_about_the_trajectory(sol
 def test_floor_objects_count_the_floors_spread_not_their_prior(solved):
     problem, _, system, state = solved
     lin = system.linearize(*state)
-    weights = problem.keyframes.images_per_keyframe
+    weights = keyframes_of(problem).images_per_keyframe
     shares = CONFIG.solver.error_covariance.bias_shares()
     on_floor = np.array([CATALOG[problem.labels[p]].on_floor for p in system.layout.priors])
     assert on_floor.any() and not on_floor.all()
-    standing = system.object_error_covariance_about_trajectory(lin, state, weights, shares).covariance
+    standing = object_error_covariance_about_trajectory(system, lin, state, weights, shares).covariance
     # The same map with the floor prior counted as stated: only its part differs.
     system.prior_spread = system.prior_spread.copy()
     system.prior_spread[on_floor, 2] = 1.0 / system.prior_inv_sigma[on_floor, 2]
-    stated = system.object_error_covariance_about_trajectory(lin, state, weights, shares).covariance
+    stated = object_error_covariance_about_trajectory(system, lin, state, weights, shares).covariance
     added = stated[:, 2, 2] - standing[:, 2, 2]
     assert np.all(added[on_floor] > 0.1 * stated[on_floor, 2, 2])
     # Raised objects share no prior with the floor ones; what they gain is through the poses.
@@ -347,7 +352,7 @@ def test_a_singular_information_falls_back_to_the_marginals(monkeypatch, caplog)
     def singular(*_args, **_kwargs):
         raise ErrorCovarianceError("information matrix is not positive definite: leading minor 7")
 
-    monkeypatch.setattr(AssociationSystem, "object_error_covariance_about_trajectory", singular)
+    monkeypatch.setattr(solver_module, "object_error_covariance_about_trajectory", singular)
     solution = solve(problem, run.groups(problem), with_covariances=True)
     assert all(o.error_cov is None and o.location_cov is not None for o in solution.objects)
     assert "marginals stand in" in caplog.text

@@ -28,8 +28,8 @@ from objslam_mapper.graph.gtsam_backend import (
     _Linearizer,
     build_gtsam_graph,
     solve_gtsam,
-    time_naive_solves,
 )
+from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.model.slice_model import predict_slices
@@ -112,7 +112,7 @@ def test_a_keyframe_graph_solves_to_the_same_numbers(per_detection):
     sparse = KeyframeConfig(min_travel_m=2.5, min_turn_rad=10.0)  # about 1 m per image: every third
     config = dataclasses.replace(TIGHT, solver=dataclasses.replace(TIGHT.solver, keyframes=sparse))
     problem, groups = make_problem(8, config=config)
-    assert problem.keyframes.problem.pose_count < problem.pose_count / 2
+    assert keyframes_of(problem).problem.pose_count < problem.pose_count / 2
     ours = solve(problem, groups, with_covariances=True)
     theirs = solve_gtsam(problem, groups, with_covariances=True, per_detection=per_detection, window_poses=None)
     assert_same_solution(theirs, ours)
@@ -316,15 +316,6 @@ def test_bad_requests_are_refused(reference):
         solve_gtsam(problem, groups, drive="isam2")
     with pytest.raises(GtsamBackendError, match="window_poses"):
         build_gtsam_graph(problem, groups, window_poses=0)
-
-
-def test_time_naive_solves_counts_what_it_timed(reference):
-    problem, groups, _ = reference
-    seconds, count = time_naive_solves(problem, [groups[:1], groups[1:]], max_seconds=60.0)
-    assert count == 2 and seconds > 0.0
-    assert time_naive_solves(problem, [groups, groups], max_seconds=0.0)[1] == 1
-    with pytest.raises(GtsamBackendError):
-        time_naive_solves(problem, [], max_seconds=1.0)
 
 
 def test_upper_edges_cut_by_the_view_are_lower_bounds_in_both_backends(reference):

@@ -13,7 +13,7 @@ from objslam_common.geometry import compose
 from objslam_common.mount import CameraMount, CameraMounts
 
 from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig
-from objslam_mapper.graph.keyframes import offset_slice_variance, select_keyframes
+from objslam_mapper.graph.keyframes import keyframes_of, offset_slice_variance, select_keyframes
 from objslam_mapper.graph.problem import build_problem, gaussian_log_normalizer
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.model.odometry import increment_stddev
@@ -122,7 +122,7 @@ def dense():
 
 def test_the_graph_of_a_dense_run_has_a_pose_per_keyframe(dense):
     _run, problem = dense
-    kf = problem.keyframes
+    kf = keyframes_of(problem)
     graph = kf.problem
     assert kf.reduces and graph.pose_count == len(kf.keyframe_pose) < problem.pose_count / 2
     np.testing.assert_array_equal(graph.stamps_ns, problem.stamps_ns[kf.keyframe_pose])
@@ -154,13 +154,13 @@ def test_the_graph_of_a_dense_run_has_a_pose_per_keyframe(dense):
 
 def test_without_keyframes_or_a_worthwhile_reduction_the_graph_is_the_image_problem(dense):
     _run, problem = dense
-    removed = 1.0 - problem.keyframes.problem.pose_count / problem.pose_count
+    removed = 1.0 - keyframes_of(problem).problem.pose_count / problem.pose_count
     for keyframes in (KeyframeConfig(enabled=False), KeyframeConfig(min_reduction=removed + 0.01)):
         other = dataclasses.replace(problem, solver=SolverConfig(keyframes=keyframes))
-        assert other.keyframes.problem is other and not other.keyframes.reduces
-        np.testing.assert_array_equal(other.keyframes.pose_keyframe, np.arange(problem.pose_count))
+        assert keyframes_of(other).problem is other and not keyframes_of(other).reduces
+        np.testing.assert_array_equal(keyframes_of(other).pose_keyframe, np.arange(problem.pose_count))
     just = dataclasses.replace(problem, solver=SolverConfig(keyframes=KeyframeConfig(min_reduction=removed - 0.01)))
-    assert just.keyframes.reduces
+    assert keyframes_of(just).reduces
 
 
 @pytest.mark.parametrize("seed", [3, 4])

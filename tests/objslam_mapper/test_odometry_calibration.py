@@ -18,7 +18,10 @@ from objslam_common.geometry import between, wrap_angle
 from scipy.stats import chi2
 
 from objslam_mapper.config import GraphConfig, OdometryCalibrationConfig
-from objslam_mapper.graph.normal_equations import AssociationSystem, layout_of
+from objslam_mapper.graph.covariance import object_covariance
+from objslam_mapper.graph.factorize import factorize
+from objslam_mapper.graph.layout import layout_of
+from objslam_mapper.graph.linearize import AssociationSystem
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, office_scene, simulate_run
@@ -216,7 +219,7 @@ def test_switched_off_the_solution_is_the_one_before_calibration_existed(dense_o
     s = solve(problem, groups, with_covariances=True)
     system = AssociationSystem(problem, layout_of(problem, groups), dense_object_limit)
     objects = np.array([np.r_[o.location_m, o.size_m] for o in s.objects])
-    anchored = system.object_covariance(system.factorize(system.linearize(s.map_T_base, objects, s.calibration), 0.0))
+    anchored = object_covariance(system, factorize(system, system.linearize(s.map_T_base, objects, s.calibration), 0.0))
     got = (
         s.log_evidence,
         s.chi2,

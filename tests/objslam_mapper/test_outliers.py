@@ -110,7 +110,8 @@ def test_merged_blobs_become_outliers_and_leave_the_object_where_it_is():
     assert np.abs(gaussian_red - reference).max() > 0.01  # the merged blobs drag a Gaussian fit aside
     np.testing.assert_allclose(robust_red, reference, atol=1e-3)
     # Exactly the corrupted slices are beyond their cap at the MAP: cost tau each, no information.
-    from objslam_mapper.graph.normal_equations import count_outliers, layout_of
+    from objslam_mapper.graph.layout import layout_of
+    from objslam_mapper.graph.linearize import count_outliers
 
     layout = layout_of(robust, groups)
     objects = np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
@@ -125,7 +126,8 @@ def test_a_cold_solve_from_drifted_odometry_still_fits_every_slice():
     run = simulate_run(poses, stamps, SCENE, CATALOG, np.random.default_rng(6), config=CONFIG, odometry_noise_scale=3.0)
     problem = build_problem(run.odometry, run.images, CONFIG.camera_mount.to_mount(), CATALOG, CONFIG)
     groups = run.groups(problem)
-    from objslam_mapper.graph.normal_equations import count_outliers, layout_of
+    from objslam_mapper.graph.layout import layout_of
+    from objslam_mapper.graph.linearize import count_outliers
 
     layout = layout_of(problem, groups)
     starts = np.array([np.r_[o.location_m, o.size_m] for o in SCENE])

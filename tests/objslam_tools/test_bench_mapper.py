@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 ROWS = (
     "detector (not in the map build)",
     "map build wall time",
@@ -131,3 +133,16 @@ def test_cached_detections_are_keyed_on_the_detector():
     assert detector_fingerprint(config, catalog) == detector_fingerprint(DetectorConfig(), load_catalog())
     other = dataclasses.replace(config, use_compressed=not config.use_compressed)
     assert detector_fingerprint(other, catalog) != detector_fingerprint(config, catalog)
+
+
+def test_time_naive_solves_counts_what_it_timed():
+    from objslam_tools.bench.naive import time_naive_solves
+    from objslam_tools.errors import ToolsError
+    from tests.objslam_mapper.test_gtsam_backend import make_problem
+
+    problem, groups = make_problem(8)
+    seconds, count = time_naive_solves(problem, [groups[:1], groups[1:]], max_seconds=60.0)
+    assert count == 2 and seconds > 0.0
+    assert time_naive_solves(problem, [groups, groups], max_seconds=0.0)[1] == 1
+    with pytest.raises(ToolsError):
+        time_naive_solves(problem, [], max_seconds=1.0)

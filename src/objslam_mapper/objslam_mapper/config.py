@@ -27,7 +27,7 @@ class OdometryCalibrationConfig:
     Wheel odometry misreads distance by a scale (mean wheel diameter), turns by a scale
     (effective wheelbase) and adds a turn per metre travelled (left/right wheel diameter
     mismatch), cf. Borenstein's UMBmark. The odometry factor predicts the measured
-    increment from the true one with these three (:mod:`objslam_mapper.graph.normal_equations`).
+    increment from the true one with these three (:mod:`objslam_mapper.graph.linearize`).
     The zero-mean Gaussian prior only has to keep them in a plausible range, not to know
     the robot: stock differential-drive robots are off by about 1-3 % in distance and
     turn before calibration (tyre pressure, wear, the contact point of wide wheels), so

@@ -109,7 +109,7 @@ def simulate_run(
     like the mapper does, so an exact run is exactly consistent with the model.
     ``odometry_calibration`` = (distance scale, turn scale, turn bias rad/m) is a systematic
     odometry error, applied to each true increment as the graph models it
-    (:mod:`objslam_mapper.graph.normal_equations`) before the random noise.
+    (:mod:`objslam_mapper.graph.linearize`) before the random noise.
     """
     config = config or GraphConfig()
     mount = mount or config.camera_mount.to_mount()

@@ -52,7 +52,6 @@ evaluates to a huge error, so both drives reject it.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
@@ -65,17 +64,15 @@ from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import SolverConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.gauge import GAUGE_DIM, about_trajectory, trajectory_gauge
-from objslam_mapper.graph.normal_equations import (
-    AssociationSystem,
-    Layout,
-    cap_schedule,
-    count_outliers,
-    graph_log_normalizer,
-    layout_of,
-)
+from objslam_mapper.graph.keyframes import keyframes_of
+from objslam_mapper.graph.layout import Layout, graph_log_normalizer, layout_of
+from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule, count_outliers
 from objslam_mapper.graph.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.graph.solver import (
+    NOT_STARTED,
     GraphSolution,
+    SolutionCovariances,
+    SolveOutcome,
     initial_calibration,
     initial_state,
     make_solution,
@@ -316,7 +313,7 @@ def build_gtsam_graph(
     ``per_detection=False``: None makes one slice factor per group and one odometry factor
     for the whole trajectory. ``cap_scale`` multiplies the slices' outlier caps (inf: none).
     """
-    problem = problem.keyframes.problem
+    problem = keyframes_of(problem).problem
     return _build(problem, layout_of(problem, groups, priors), per_detection, window_poses, cap_scale)
 
 
@@ -499,7 +496,7 @@ def solve_gtsam(
     """
     if drive not in DRIVES:
         raise GtsamBackendError(f"drive must be one of {', '.join(DRIVES)}, got {drive!r}")
-    keyframes = problem.keyframes
+    keyframes = keyframes_of(problem)
     problem = keyframes.problem  # from here on the graph's: one pose per keyframe
     layout = layout_of(problem, groups, priors)
     poses, objects = initial_state(keyframes, layout, warm_start)
@@ -513,7 +510,7 @@ def solve_gtsam(
     ).valid
     if not np.all(valid):
         logger.debug("GTSAM solve cannot start: a pose lies inside an object's starting cylinder")
-        return make_solution(keyframes, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
+        return make_solution(keyframes, layout, (poses, objects, calib), NOT_STARTED)
 
     cfg = problem.solver
     limit = cfg.max_iterations if max_iterations is None else max_iterations
@@ -562,21 +559,9 @@ def solve_gtsam(
         system = AssociationSystem(problem, layout, cfg.dense_object_limit)
         system.cap_scale = solved_cap_scale
         error_cov = object_error_covariance(keyframes, system, (poses, objects, calib))
-    return make_solution(
-        keyframes,
-        layout,
-        poses,
-        objects,
-        iterations,
-        converged,
-        log_evidence,
-        2.0 * final.cost,
-        log_det,
-        covariance,
-        calib,
-        calib_cov,
-        error_cov,
-    )
+    outcome = SolveOutcome(iterations, converged, log_evidence, 2.0 * final.cost, log_det)
+    covariances = SolutionCovariances(objects=covariance, calibration=calib_cov, errors=error_cov)
+    return make_solution(keyframes, layout, (poses, objects, calib), outcome, covariances)
 
 
 def _about_trajectory(
@@ -607,25 +592,3 @@ def _about_trajectory(
     split = POSE_DIM * len(poses)
     object_gauge_cov = solved[split : split + OBJECT_DIM * len(objects)]
     return about_trajectory(marginals, object_gauge_cov, rows @ solved, objects[:, :2], gauge.centroid_xy)
-
-
-def time_naive_solves(
-    problem: GraphProblem, groups_list: Sequence[Sequence[ArrayLike]], max_seconds: float
-) -> tuple[float, int]:
-    """Seconds per naive solve and how many were timed (issue 7's baseline).
-
-    The naive baseline: for each association of ``groups_list`` in turn, a fresh graph with
-    one CustomFactor per detection, solved cold by GTSAM's own Levenberg-Marquardt, with its
-    evidence (one elimination). Stops after the first solve that ends past ``max_seconds``
-    (at least one solve).
-    """
-    if not groups_list:
-        raise GtsamBackendError("no associations to time")
-    start = time.perf_counter()
-    count = 0
-    for groups in groups_list:
-        solve_gtsam(problem, groups, per_detection=True, drive="optimizer")
-        count += 1
-        if time.perf_counter() - start >= max_seconds:
-            break
-    return (time.perf_counter() - start) / count, count

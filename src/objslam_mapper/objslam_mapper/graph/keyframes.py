@@ -1,7 +1,7 @@
 r"""Keyframes: the factor graph's robot poses, one per stretch of path instead of one per image.
 
 A known-association solve costs time linear in the number of graph poses (the objects'
-Schur complement is a product over the pose band, :mod:`objslam_mapper.graph.normal_equations`),
+Schur complement is a product over the pose band, :mod:`objslam_mapper.graph.linearize`),
 and the association sampler solves hundreds of associations. With one pose per image the
 cost of a map grows with the frame rate, though a camera that takes twice the images of the
 same path sees the same world. So the graph has one pose per *keyframe*: the first image,
@@ -39,14 +39,15 @@ to a state its target prefers by 156 nats, with or without keyframes, that has a
 patch as an object: a fault of the missed-detection term, see the README, which the chain
 had not found before.)
 
-:attr:`GraphProblem.keyframes <objslam_mapper.graph.problem.GraphProblem.keyframes>` holds the
-:class:`KeyframeGraph` of a problem. Where every image is a keyframe (or keyframes are off
-or not worth it) its problem is the image problem itself, so nothing changes.
+:func:`keyframes_of` gives the :class:`KeyframeGraph` of a problem (built once per problem).
+Where every image is a keyframe (or keyframes are off or not worth it) its problem is
+the image problem itself, so nothing changes.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -205,3 +206,15 @@ def keyframe_graph(problem: GraphProblem, config: KeyframeConfig) -> KeyframeGra
         measurement_outlier_cost=read_only(problem.measurement_outlier_cost + normalizer_change),
     )
     return KeyframeGraph(graph, keyframes, pose_keyframe, read_only(keyframe_T_pose))
+
+
+_GRAPHS: weakref.WeakKeyDictionary[GraphProblem, KeyframeGraph] = weakref.WeakKeyDictionary()
+
+
+def keyframes_of(problem: GraphProblem) -> KeyframeGraph:
+    """The graph the solvers work on: ``problem``'s :class:`KeyframeGraph` under its own
+    ``solver.keyframes`` settings, built on first use and kept as long as the problem."""
+    graph = _GRAPHS.get(problem)
+    if graph is None:
+        graph = _GRAPHS[problem] = keyframe_graph(problem, problem.solver.keyframes)
+    return graph

@@ -19,7 +19,7 @@ sampler (:func:`objslam_mapper.graph.solver.solve`). It holds
   where each slice's cost stops growing (:mod:`objslam_mapper.model.outliers`);
 - when ``odometry.calibration.enabled``, the zero-mean prior of the odometry calibration
   ``c = (distance_scale, turn_scale, turn_bias_rad_per_m)`` (one variable per map, see
-  :mod:`objslam_mapper.graph.normal_equations`) and each increment's measured path length, which
+  :mod:`objslam_mapper.graph.linearize`) and each increment's measured path length, which
   the turn bias multiplies;
 - the class priors (paper eqs. 7-8) as per-class means and standard deviations of the
   object vector ``(x, y, z_base, diameter, height)``: ``x, y`` weak around the first
@@ -39,11 +39,9 @@ out and counted (``rejected_slice_count``, ``rejected_image_count``).
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -56,9 +54,6 @@ from objslam_mapper.errors import MapperError
 from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 from objslam_mapper.model.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP
-
-if TYPE_CHECKING:
-    from objslam_mapper.graph.keyframes import KeyframeGraph
 
 logger = logging.getLogger(__name__)
 
@@ -147,13 +142,6 @@ class GraphProblem:
     def mounts(self, measurements: NDArray[np.int64]) -> CameraMount | CameraMounts:
         """The camera mounts of ``measurements`` relative to their poses (for the slice model)."""
         return self.mount if self.measurement_mount is None else self.measurement_mount.take(measurements)
-
-    @functools.cached_property
-    def keyframes(self) -> KeyframeGraph:
-        """The graph the solvers work on: one pose per keyframe (:mod:`objslam_mapper.graph.keyframes`)."""
-        from objslam_mapper.graph.keyframes import keyframe_graph  # it builds GraphProblems
-
-        return keyframe_graph(self, self.solver.keyframes)
 
 
 def with_extra_priors(

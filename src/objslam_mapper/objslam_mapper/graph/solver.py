@@ -10,7 +10,7 @@ over ``theta = (poses (N x 3), objects (K x 5))`` -- odometry factors, the first
 prior, one slice factor per assigned measurement (:mod:`slice_model`, analytic
 Jacobians) and the class priors of every object -- is minimized by Gauss-Newton with a
 Levenberg-Marquardt fallback, driven here over numpy arrays
-(:mod:`objslam_mapper.graph.normal_equations` assembles and solves each linear system).
+(:mod:`objslam_mapper.graph.linearize` assembles and solves each linear system).
 
 The Laplace approximation of the evidence (paper eq. 25) at the MAP ``theta*`` is
 
@@ -30,7 +30,7 @@ trajectory as a whole rather than the anchored first pose (:mod:`objslam_mapper.
 
 With ``odometry.calibration.enabled`` the state also holds the odometry calibration ``c``
 (distance scale, turn scale, turn bias per metre; one per map, model in
-:mod:`objslam_mapper.graph.normal_equations`): it starts from the warm start's or from 0, its
+:mod:`objslam_mapper.graph.linearize`): it starts from the warm start's or from 0, its
 zero-mean prior's normalizer is part of ``problem.trajectory_log_normalizer``, it adds 3 to
 ``d``, and its MAP and marginal covariance are ``GraphSolution.calibration(_cov)``.
 
@@ -51,23 +51,24 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from objslam_common.geometry import wrap_angle
 
 from objslam_mapper.config import SolverConfig
-from objslam_mapper.graph.error_covariance import ErrorCovarianceError
-from objslam_mapper.graph.initialization import initial_object
-from objslam_mapper.graph.keyframes import KeyframeGraph
-from objslam_mapper.graph.normal_equations import (
-    AssociationSystem,
-    Factorization,
-    Layout,
-    Linearization,
-    cap_schedule,
-    layout_of,
+from objslam_mapper.graph.covariance import (
+    calibration_covariance,
+    object_covariance_about_trajectory,
+    object_error_covariance_about_trajectory,
 )
+from objslam_mapper.graph.error_covariance import ErrorCovarianceError
+from objslam_mapper.graph.factorize import Factorization, factorize
+from objslam_mapper.graph.initialization import initial_object
+from objslam_mapper.graph.keyframes import KeyframeGraph, keyframes_of
+from objslam_mapper.graph.layout import Layout, layout_of
+from objslam_mapper.graph.linearize import AssociationSystem, Linearization, cap_schedule
 from objslam_mapper.graph.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
 from objslam_mapper.model.slice_model import camera_positions
 
@@ -189,7 +190,7 @@ def solve(
     the evidence at its last iterate, which is below that of the optimum up to the
     log-determinant.
     """
-    keyframes = problem.keyframes
+    keyframes = keyframes_of(problem)
     problem = keyframes.problem  # from here on the graph's: one pose per keyframe
     layout = layout_of(problem, groups, priors)
     graph = AssociationSystem(problem, layout, problem.solver.dense_object_limit)
@@ -205,7 +206,7 @@ def solve(
     lin = graph.linearize(poses, objects, calib)
     if not lin.valid:
         logger.debug("solve cannot start: a pose lies inside an object's starting cylinder")
-        return make_solution(keyframes, layout, poses, objects, 0, False, -np.inf, np.inf, np.nan, None, calib)
+        return make_solution(keyframes, layout, (poses, objects, calib), NOT_STARTED)
     limit = problem.solver.max_iterations if max_iterations is None else max_iterations
     iterations, state = 0, (poses, objects, calib)
     for phase, scale in enumerate(schedule):
@@ -218,33 +219,21 @@ def solve(
         iterations += more
     poses, objects, calib = state
     if final is None:
-        final = graph.factorize(lin, 0.0)
+        final = factorize(graph, lin, 0.0)
     if not converged:
         logger.debug("solve stopped after %d linearizations without converging (cost %.6g)", iterations, lin.cost)
 
     log_evidence = -lin.cost + graph.log_normalizer + 0.5 * graph.dimension * LOG_2PI - 0.5 * final.log_det
     covariance = None
     if with_covariances:
-        covariance = graph.object_covariance_about_trajectory(
-            final, poses[:, :2], keyframes.images_per_keyframe, objects
+        covariance = object_covariance_about_trajectory(
+            graph, final, poses[:, :2], keyframes.images_per_keyframe, objects
         )
-    calib_cov = graph.calibration_covariance(final) if with_covariances else None
+    calib_cov = calibration_covariance(graph, final) if with_covariances else None
     error_cov = object_error_covariance(keyframes, graph, state, lin) if with_covariances else None
-    return make_solution(
-        keyframes,
-        layout,
-        poses,
-        objects,
-        iterations,
-        converged,
-        log_evidence,
-        2.0 * lin.cost,
-        final.log_det,
-        covariance,
-        calib,
-        calib_cov,
-        error_cov,
-    )
+    outcome = SolveOutcome(iterations, converged, log_evidence, 2.0 * lin.cost, final.log_det)
+    covariances = SolutionCovariances(objects=covariance, calibration=calib_cov, errors=error_cov)
+    return make_solution(keyframes, layout, (poses, objects, calib), outcome, covariances)
 
 
 _State = tuple[NDArray, NDArray, NDArray]  # poses (N, 3), objects (K, 5), calibration (C,)
@@ -268,8 +257,8 @@ def object_error_covariance(
         return None
     lin = system.linearize(*state) if lin is None else lin
     try:
-        result = system.object_error_covariance_about_trajectory(
-            lin, state, keyframes.images_per_keyframe, config.bias_shares()
+        result = object_error_covariance_about_trajectory(
+            system, lin, state, keyframes.images_per_keyframe, config.bias_shares()
         )
     except ErrorCovarianceError as exc:
         logger.warning("no error covariances for this solution, the marginals stand in: %s", exc)
@@ -296,7 +285,7 @@ def _minimize(
     iterations = 1
     while iterations < max_iterations:
         try:
-            fac = graph.factorize(lin, damping)
+            fac = factorize(graph, lin, damping)
         except np.linalg.LinAlgError:
             damping, growth = max(cfg.initial_lambda, damping * growth), 2.0 * growth
             if damping > cfg.max_lambda:
@@ -328,22 +317,42 @@ def _minimize(
     return state, lin, None, iterations, False
 
 
+class SolveOutcome(NamedTuple):
+    """How a solve ended: what :class:`GraphSolution` reports beside the state."""
+
+    iterations: int
+    converged: bool
+    log_evidence: float
+    chi2: float
+    log_det: float
+
+
+# A solve that could not start (a pose inside an object's starting cylinder).
+NOT_STARTED = SolveOutcome(iterations=0, converged=False, log_evidence=-np.inf, chi2=np.inf, log_det=np.nan)
+
+
+class SolutionCovariances(NamedTuple):
+    """Covariances of a solution (None where not computed)."""
+
+    objects: NDArray | None = None  # (K, 5, 5) posterior marginals about the trajectory
+    calibration: NDArray | None = None  # (C, C)
+    errors: NDArray | None = None  # (K, 5, 5) of the estimates' errors
+
+
+NO_COVARIANCES = SolutionCovariances()
+
+
 def make_solution(
     keyframes: KeyframeGraph,
     layout: Layout,
-    poses: NDArray,
-    objects: NDArray,
-    iterations: int,
-    converged: bool,
-    log_evidence: float,
-    chi2: float,
-    log_det: float,
-    covariance: NDArray | None,
-    calibration: NDArray | None = None,
-    calibration_cov: NDArray | None = None,
-    error_covariance: NDArray | None = None,
+    state: tuple[NDArray, NDArray, NDArray | None],
+    outcome: SolveOutcome,
+    covariances: SolutionCovariances = NO_COVARIANCES,
 ) -> GraphSolution:
-    """The solution of a solve of ``keyframes.problem`` that ended at graph poses ``poses``."""
+    """The solution of a solve of ``keyframes.problem`` that ended at ``state``: graph poses,
+    objects and odometry calibration (None: the prior mean)."""
+    poses, objects, calibration = state
+    covariance, error_covariance = covariances.objects, covariances.errors
     problem = keyframes.problem
     estimates = tuple(
         ObjectEstimate(
@@ -367,11 +376,11 @@ def make_solution(
         map_T_base=map_T_base,
         objects=estimates,
         object_of_measurement=object_of,
-        iterations=iterations,
-        converged=converged,
-        log_evidence=float(log_evidence),
-        chi2=float(chi2),
-        log_det_information=float(log_det),
+        iterations=outcome.iterations,
+        converged=outcome.converged,
+        log_evidence=float(outcome.log_evidence),
+        chi2=float(outcome.chi2),
+        log_det_information=float(outcome.log_det),
         calibration=calibration,
-        calibration_cov=calibration_cov,
+        calibration_cov=covariances.calibration,
     )

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.inference.chain import ChainResult
 from objslam_mapper.inference.tracklets import TrackletResult
@@ -66,7 +67,7 @@ def inputs_diagnostics(problem: GraphProblem, chained: TrackletResult, seed: int
     return {
         "seed": seed,
         "poses": problem.pose_count,
-        "graph_poses": problem.keyframes.problem.pose_count,  # objslam_mapper.graph.keyframes
+        "graph_poses": keyframes_of(problem).problem.pose_count,  # objslam_mapper.graph.keyframes
         "measurements": problem.measurement_count,
         "rejected_images": problem.rejected_image_count,
         "rejected_slices": problem.rejected_slice_count,

@@ -15,7 +15,7 @@ not its chord),
 
 The systematic part of the odometry error (distance and turn scales, turn bias per metre)
 is not noise: the graph estimates it as a variable (``odometry.calibration``, see
-:mod:`objslam_mapper.graph.normal_equations`), using ``s`` of each increment for the bias.
+:mod:`objslam_mapper.graph.linearize`), using ``s`` of each increment for the bias.
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ def inlier_log_weight(probability: float) -> float:
 
 # The solvers minimize in phases, graduating the caps (graduated non-convexity, as in
 # Yang et al. 2020): each cap multiplied by the phase's scale, the last phase with the
-# true caps (objslam_mapper.graph.normal_equations.cap_schedule). From drifted odometry, or when
+# true caps (objslam_mapper.graph.linearize.cap_schedule). From drifted odometry, or when
 # a move closes a loop, good slices sit far beyond their cap and the truncated cost would
 # leave them out instead of moving the poses to fit them, so a cold solve starts Gaussian
 # (no cap at all); a warm start is near a solution already, and caps 100 times higher

@@ -1,0 +1,236 @@
+"""Solving one association's normal equations: the Gauss-Newton step, ``log|Lambda|``, and the
+solves the covariances need (docs/method.md, "Why it is fast").
+
+Two ways, both exact (``log|Lambda|`` is what GTSAM's ``2 log|R|`` gives):
+
+- up to ``solver.dense_object_limit`` objects, by eliminating the poses first. Their
+  block ``A`` is block-tridiagonal: a band of half-width 5, factored by LAPACK's banded
+  Cholesky (``A = U^T U``). With ``B`` the pose-object block and ``C`` the object block,
+  ``W = U^-T B`` gives the objects' Schur complement ``S = C - W^T W`` (dense, 5K x 5K),
+  ``log|Lambda| = log|A| + log|S|``, and the object marginal covariances are the blocks of
+  ``S^-1``. This is the fast path for a map's worth of long-lived objects.
+- beyond, by a sparse LU (SuperLU, minimum-degree ordering, symmetric mode without
+  pivoting, which is Cholesky in disguise for a positive definite matrix): many small
+  objects (tracklets seen over a few poses) are then eliminated into the pose band
+  instead of making the dense Schur complement (cubic in K) large.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse
+import scipy.sparse.linalg
+from numpy.typing import NDArray
+from scipy.linalg import lapack
+
+from objslam_mapper.graph.linearize import AssociationSystem, Linearization
+from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
+
+_BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
+
+
+@dataclass
+class Factorization:
+    """A solved (damped) system: step, log-determinant, and what the covariances need."""
+
+    log_det: float
+    step_pose: NDArray[np.float64]
+    step_object: NDArray[np.float64]
+    predicted_decrease: float
+    step_calib: NDArray[np.float64]  # (C,)
+    chol_schur: NDArray[np.float64] | None = None  # dense path: upper Cholesky factor of S (objects, then c)
+    chol_pose: NDArray[np.float64] | None = None  # dense path: banded upper Cholesky factor U of the pose block
+    w_cross: NDArray[np.float64] | None = None  # dense path: W = U^-T B
+    sparse_lu: scipy.sparse.linalg.SuperLU | None = None  # sparse path
+
+
+def _sparse_values(lin: Linearization) -> NDArray[np.float64]:
+    """Block values in the order of _SparsePattern's entries."""
+    off = lin.pose_off.ravel()
+    cross = lin.cross.ravel()
+    pc = lin.pose_calib.ravel()
+    return np.concatenate(
+        [lin.pose_diag.ravel(), off, off, cross, cross, lin.object_diag.ravel(), pc, pc, lin.calib_diag.ravel()]
+    )
+
+
+@functools.lru_cache(maxsize=8)
+def _band_index(n_poses: int) -> tuple[tuple[NDArray, NDArray], NDArray, tuple[NDArray, NDArray], NDArray]:
+    """Where the pose blocks go in LAPACK upper banded storage ab[BAND + i - j, j]."""
+    p, a, b = np.meshgrid(np.arange(n_poses), np.arange(3), np.arange(3), indexing="ij")
+    upper = (a <= b).ravel()
+    diag_at = ((_BAND + a - b).ravel()[upper], (3 * p + b).ravel()[upper])
+    diag_src = (9 * p + 3 * a + b).ravel()[upper]
+    p, a, b = np.meshgrid(np.arange(max(n_poses - 1, 0)), np.arange(3), np.arange(3), indexing="ij")
+    off_at = ((_BAND + a - b - 3).ravel(), (3 * p + 3 + b).ravel())
+    off_src = (9 * p + 3 * a + b).ravel()
+    return diag_at, diag_src, off_at, off_src
+
+
+@functools.lru_cache(maxsize=32)
+def _block_diag_index(n_blocks: int, size: int) -> tuple[NDArray, NDArray]:
+    """(row, col) of the entries of n_blocks diagonal size x size blocks, block-major."""
+    k, a, b = np.meshgrid(np.arange(n_blocks), np.arange(size), np.arange(size), indexing="ij")
+    return (size * k + a).ravel(), (size * k + b).ravel()
+
+
+# A slice factor's 8 variables (pose x, y, theta | location x, y, z_base | diameter, height)
+# enter its 4 components through the 6 reduced columns of slice_model.predict_reduced
+# (delta_x, delta_y, theta, z_base, d, H): pose x, y as -delta, location x, y as +delta.
+
+
+def sparse_information(system: AssociationSystem, lin: Linearization, damping: float = 0.0) -> scipy.sparse.csc_matrix:
+    """``Lambda`` of a linearization as a sparse matrix, Marquardt-damped if asked.
+
+    Rows: poses, objects, calibration.
+    """
+    pattern = system.layout.sparse
+    data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices))
+    if damping > 0.0:
+        data[pattern.diagonal_slots] *= 1.0 + damping
+    return scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
+
+
+def information_matrix(system: AssociationSystem, lin: Linearization) -> NDArray[np.float64]:
+    """The dense ``Lambda`` of a linearization (rows as in the sparse system)."""
+    return sparse_information(system, lin).toarray()
+
+
+def factorize(system: AssociationSystem, lin: Linearization, damping: float) -> Factorization:
+    """Solve the normal equations, Marquardt-damped (``diag *= 1 + damping``) if asked.
+
+    Raises LinAlgError if the system is not positive definite.
+    """
+    if system.n_objects <= system.dense_object_limit:
+        fac = _factorize_schur(system, lin, damping)
+    else:
+        fac = _factorize_sparse(system, lin, damping)
+    # Decrease of the quadratic model: 1/2 (-g^T step + damping step^T diag(Lambda) step).
+    predicted = -float(lin.grad_pose @ fac.step_pose + lin.grad_object @ fac.step_object)
+    if system.n_calib:
+        predicted -= float(lin.grad_calib @ fac.step_calib)
+    if damping > 0.0:
+        diag_pose, diag_object, diag_calib = lin.diagonal()
+        predicted += damping * float(diag_pose @ fac.step_pose**2 + diag_object @ fac.step_object**2)
+        if system.n_calib:
+            predicted += damping * float(diag_calib @ fac.step_calib**2)
+    fac.predicted_decrease = 0.5 * predicted
+    return fac
+
+
+def _factorize_schur(system: AssociationSystem, lin: Linearization, damping: float) -> Factorization:
+    """Poses first: with A = U^T U, W = U^-T B and w = U^-T g_pose, S = C - W^T W,
+    step_dense = S^-1 (W^T w - g_dense), step_pose = -U^-1 (w + W step_dense).
+
+    The dense variables are the objects, then the calibration (if estimated): ``B`` holds
+    their pose blocks, ``C`` their own (objects and calibration share no factor)."""
+    n, k, nc = system.n_poses, system.n_objects, system.n_calib
+    n_object_vars = OBJECT_DIM * k
+    diag_at, diag_src, off_at, off_src = _band_index(n)
+    pose_diag, object_diag, calib_diag = lin.pose_diag, lin.object_diag, lin.calib_diag
+    if damping > 0.0:
+        pose_diag, object_diag, calib_diag = pose_diag.copy(), object_diag.copy(), calib_diag.copy()
+        i3, i5 = np.arange(POSE_DIM), np.arange(OBJECT_DIM)
+        pose_diag[:, i3, i3] *= 1.0 + damping
+        object_diag[:, i5, i5] *= 1.0 + damping
+        calib_diag[np.diag_indices(nc)] *= 1.0 + damping
+    band = np.zeros((_BAND + 1, POSE_DIM * n))
+    band[diag_at] = pose_diag.ravel()[diag_src]
+    band[off_at] = lin.pose_off.ravel()[off_src]
+    chol_pose = scipy.linalg.cholesky_banded(band, lower=False, check_finite=False)
+    log_det = 2.0 * float(np.sum(np.log(chol_pose[_BAND])))
+    rhs = np.empty((POSE_DIM * n, n_object_vars + nc + 1), order="F")
+    rhs[:, :n_object_vars] = lin.pose_object(system.layout)
+    rhs[:, n_object_vars:-1] = lin.pose_calib.reshape(POSE_DIM * n, nc)
+    rhs[:, -1] = lin.grad_pose
+    whitened, info = lapack.dtbtrs(chol_pose, rhs, uplo="U", trans="T", overwrite_b=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+    w_cross, w_grad = whitened[:, :-1], whitened[:, -1]
+    chol_schur = None
+    step_dense = np.zeros(0)
+    if n_object_vars + nc:
+        schur = -(w_cross.T @ w_cross)
+        schur[_block_diag_index(k, OBJECT_DIM)] += object_diag.ravel()
+        schur[n_object_vars:, n_object_vars:] += calib_diag
+        grad_dense = np.concatenate([lin.grad_object, lin.grad_calib]) if nc else lin.grad_object
+        chol_schur = scipy.linalg.cholesky(schur, lower=False, check_finite=False)
+        log_det += 2.0 * float(np.sum(np.log(np.diag(chol_schur))))
+        step_dense = scipy.linalg.cho_solve((chol_schur, False), w_cross.T @ w_grad - grad_dense, check_finite=False)
+    back, info = lapack.dtbtrs(chol_pose, (w_grad + w_cross @ step_dense)[:, None], uplo="U", trans="N")
+    if info != 0:
+        raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+    return Factorization(
+        log_det=log_det,
+        step_pose=-back[:, 0],
+        step_object=step_dense[:n_object_vars],
+        predicted_decrease=0.0,
+        step_calib=step_dense[n_object_vars:],
+        chol_schur=chol_schur,
+        chol_pose=chol_pose,
+        w_cross=w_cross,
+    )
+
+
+def _factorize_sparse(system: AssociationSystem, lin: Linearization, damping: float) -> Factorization:
+    matrix = sparse_information(system, lin, damping)
+    try:
+        lu = scipy.sparse.linalg.splu(
+            matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+        )
+    except RuntimeError as exc:  # "Factor is exactly singular"
+        raise np.linalg.LinAlgError(str(exc)) from exc
+    pivots = lu.U.diagonal()
+    if np.any(pivots <= 0.0):
+        raise np.linalg.LinAlgError("normal equations are not positive definite")
+    step = lu.solve(-np.concatenate([lin.grad_pose, lin.grad_object, lin.grad_calib]))
+    split = POSE_DIM * system.n_poses
+    split_calib = split + OBJECT_DIM * system.n_objects
+    return Factorization(
+        log_det=float(np.sum(np.log(pivots))),
+        step_pose=step[:split],
+        step_object=step[split:split_calib],
+        predicted_decrease=0.0,
+        step_calib=step[split_calib:],
+        sparse_lu=lu,
+    )
+
+
+def dense_inverse_columns(system: AssociationSystem, fac: Factorization, first: int, count: int) -> NDArray[np.float64]:
+    """Rows and columns [first, first + count) of the inverse over the dense variables."""
+    if fac.chol_schur is not None:
+        unit = np.zeros((len(fac.chol_schur), count))
+        unit[first : first + count] = np.eye(count)
+        inv = scipy.linalg.cho_solve((fac.chol_schur, False), unit, check_finite=False)
+        return inv[first : first + count]
+    split = POSE_DIM * system.n_poses
+    unit = np.zeros((split + OBJECT_DIM * system.n_objects + system.n_calib, count))
+    unit[split + first : split + first + count] = np.eye(count)
+    return fac.sparse_lu.solve(unit)[split + first : split + first + count]
+
+
+def solve_pose_rhs(system: AssociationSystem, fac: Factorization, rhs_pose: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``Lambda^-1 [rhs_pose; 0]`` for (3N, m) right-hand sides on the poses only (undamped factorization).
+
+    Dense path, with ``z = U^-T r``: dense part ``x_d = -S^-1 W^T z``, poses
+    ``x_p = U^-1 (z - W x_d)``. Rows as in the sparse system: poses, objects, calibration.
+    """
+    rhs_pose = np.asarray(rhs_pose, dtype=float)
+    if fac.sparse_lu is not None:
+        rhs = np.zeros((POSE_DIM * system.n_poses + OBJECT_DIM * system.n_objects + system.n_calib, rhs_pose.shape[1]))
+        rhs[: len(rhs_pose)] = rhs_pose
+        return fac.sparse_lu.solve(rhs)
+    z, info = lapack.dtbtrs(fac.chol_pose, rhs_pose, uplo="U", trans="T")
+    if info != 0:
+        raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+    x_dense = np.zeros((fac.w_cross.shape[1], rhs_pose.shape[1]))
+    if fac.chol_schur is not None:
+        x_dense = -scipy.linalg.cho_solve((fac.chol_schur, False), fac.w_cross.T @ z, check_finite=False)
+    x_pose, info = lapack.dtbtrs(fac.chol_pose, z - fac.w_cross @ x_dense, uplo="U", trans="N")
+    if info != 0:
+        raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+    return np.concatenate([x_pose, x_dense])
