@@ -182,7 +182,7 @@ class ErrorCovarianceConfig:
     and so overstates the error several times. Either way the MAP, the evidence and the
     existence test are the model's. A bias share is the bias's stddev in units of each
     slice's configured stddev; the defaults are the detector's on the bundled bags
-    (``scripts/object_bias.py bags/small bags/office``: root mean square over the objects
+    (``objslam diagnose object-bias bags/small bags/office``: root mean square over the objects
     of the mean of each object's whitened slice errors at the ground truth, rounded).
     The class priors count with the spread of real instances about their means: as stated
     for sizes and raised objects' base heights, ``floor_z_base_spread_m`` for floor objects,

@@ -10,7 +10,7 @@ and slices the model cannot explain from their object at the truth (merged blobs
 one known-association solve with marginals
 (:func:`objslam_mapper.inference.baselines.map_of_groups`). It lives here, not in the core, because
 the core never reads ground truth. :func:`oracle_problem` gives the diagnostics in
-``scripts/`` a simulated bag's problem and its ground-truth association in one call.
+``objslam diagnose`` a simulated bag's problem and its ground-truth association in one call.
 """
 
 from __future__ import annotations

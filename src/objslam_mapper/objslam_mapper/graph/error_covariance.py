@@ -117,7 +117,7 @@ def white_weights(group: NoiseGroup, inverse: NDArray[np.float64]) -> NDArray[np
     return r * r / np.maximum(redundancy, 1.0 / MAX_INFLATION)
 
 
-def _owner_rows(group: NoiseGroup, values: NDArray[np.float64]) -> scipy.sparse.csr_matrix:
+def owner_rows(group: NoiseGroup, values: NDArray[np.float64]) -> scipy.sparse.csr_matrix:
     """(G, m): row j holds ``values`` (m,) on the rows of object j and zeros elsewhere."""
     m = len(group.residual)
     return scipy.sparse.csr_matrix((values, (group.owner, np.arange(m))), shape=(int(group.owner.max()) + 1, m))
@@ -143,7 +143,7 @@ def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArra
     count = np.maximum(np.bincount(group.owner, minlength=owners).astype(float), 1.0)
     mean = np.bincount(group.owner, weights=group.residual, minlength=owners) / count
     white = np.bincount(group.owner, weights=weights, minlength=owners) / count
-    totals = (_owner_rows(group, np.ones(len(group.residual))) @ group.jacobian).toarray()  # g_j
+    totals = (owner_rows(group, np.ones(len(group.residual))) @ group.jacobian).toarray()  # g_j
     visible = np.clip(1.0 - np.sum((totals @ inverse) * totals, axis=1) / count, MIN_VISIBLE, 1.0)
     own = (mean**2 - white / count) / visible**2
     # Under the configured bias the mean is N(0, v² share² + w̄ / n): only a mean far outside
@@ -189,7 +189,7 @@ def error_covariance(
         covariance += (weights[:, None] * projected).T @ projected
         if group.owner is not None and group.bias_share > 0.0:
             share = bias_shares(group, inverse, weights)
-            common = _owner_rows(group, share[group.owner]) @ projected  # S_k J_k X
+            common = owner_rows(group, share[group.owner]) @ projected  # S_k J_k X
             covariance += common.T @ common
     if prior_scale is not None:
         rest *= np.outer(prior_scale, prior_scale)

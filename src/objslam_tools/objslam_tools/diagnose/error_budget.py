@@ -1,6 +1,6 @@
 """Where an oracle map's object errors come from: each measurement group's errors at the ground truth.
 
-Usage: python scripts/error_budget.py BAG [--params FILE] [--calibration DS TS TB]
+Usage: objslam diagnose error-budget BAG [--params FILE] [--calibration DS TS TB]
 
 Solves the ground-truth association of a simulated BAG (as `objslam map --association
 oracle` does), then evaluates every factor at the ground truth, taken into the map's
@@ -17,7 +17,7 @@ and z errors it makes, beside what the map's error covariance expects of it; las
 slice biases' parts again with each object's bias replaced by its class's mean, and by
 the mean over all objects (biases common to many objects move the map's scale). The truth of the odometry
 calibration is the simulator's default (``objslam_tools.sim.motion.OdometryNoise``)
-unless given. A diagnostic for the README's NEES discussion, not part of the package.
+unless given. A diagnostic of the reported covariances (docs/method.md).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from objslam_common.geometry import inverse, transform_points, wrap_angle
 
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.covariance import noise_groups, prior_scale
-from objslam_mapper.graph.error_covariance import _owner_rows
+from objslam_mapper.graph.error_covariance import owner_rows
 from objslam_mapper.graph.factorize import information_matrix
 from objslam_mapper.graph.gauge import GAUGE_DIM, object_motion, trajectory_gauge
 from objslam_mapper.graph.keyframes import keyframes_of
@@ -125,7 +125,7 @@ def error_budget(
             shared[f"{group.name} bias, {what}"] = per_object(-(solved.T @ (group.jacobian.T @ common[group.owner])))
         parts[f"{group.name} rest"] = per_object(-(solved.T @ (group.jacobian.T @ (residual - mean))))
         # Each object's bias moves every object (through the poses): the stddevs over all of them.
-        unit = _owner_rows(group, np.ones(len(residual))) @ (group.jacobian @ solved)  # (K owners, 5K)
+        unit = owner_rows(group, np.ones(len(residual))) @ (group.jacobian @ solved)  # (K owners, 5K)
         model[f"{group.name} bias"] = group.bias_share * per_object(np.sqrt(np.sum(unit**2, axis=0)))
 
     offsets = np.zeros(system.dimension)  # P (x_true - μ) of the priors
@@ -164,10 +164,12 @@ def _rms_z(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(errors[:, Z] ** 2)))
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("bag")
-    parser.add_argument("--params", default=str(default_config_dir() / "mapper.yaml"))
+DESCRIPTION = "an oracle map's object errors split into each measurement group's and prior's part"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", metavar="BAG", help="a simulated bag (with ground truth)")
+    parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
     default = OdometryNoise()
     parser.add_argument(
         "--calibration",
@@ -177,10 +179,12 @@ def main() -> None:
         default=(default.distance_scale, default.turn_scale, default.turn_bias_rad_per_m),
         help="the odometry's true distance scale, turn scale and turn bias (rad/m)",
     )
-    args = parser.parse_args()
 
-    config = load_config(MapperConfig, args.params, "mapper")
-    # One graph pose per image, for the truth's poses (as scripts/aligned_covariance.py).
+
+def run(args: argparse.Namespace) -> int:
+
+    config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
+    # One graph pose per image, for the truth's poses (as `objslam diagnose aligned-covariance`).
     keyframes = dataclasses.replace(config.solver.keyframes, enabled=False)
     config = dataclasses.replace(config, solver=dataclasses.replace(config.solver, keyframes=keyframes))
     problem, reference, ids, groups = oracle_problem(args.bag, config, load_catalog(config.catalog_file or None))
@@ -218,7 +222,4 @@ def main() -> None:
     print("slice biases made common: each object's bias replaced by its class's mean, or by the mean of all")
     for name, part in budget.shared.items():
         print(f"  {name:44s} xy {_rms_xy(part) * 1e3:7.2f}   z {_rms_z(part) * 1e3:6.2f}")
-
-
-if __name__ == "__main__":
-    main()
+    return 0

@@ -1,20 +1,13 @@
-"""The linearized trajectory fit of scripts/aligned_covariance.py against the fit itself."""
+"""The linearized trajectory fit of `objslam diagnose aligned-covariance` against the fit itself."""
 
 from __future__ import annotations
-
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from objslam_tools.diagnose import aligned_covariance
 from objslam_tools.trajectory import fit_se2, transform_poses
-
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "aligned_covariance.py"
-_spec = importlib.util.spec_from_file_location("aligned_covariance", SCRIPT)
-aligned_covariance = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(aligned_covariance)
 
 
 @settings(max_examples=25, deadline=None)

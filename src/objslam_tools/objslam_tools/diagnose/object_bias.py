@@ -1,6 +1,6 @@
 """The detector's per-object bias: the defaults of `solver.error_covariance.*_bias_share`.
 
-Usage: python scripts/object_bias.py BAG [BAG ...] [--params FILE]
+Usage: objslam diagnose object-bias BAG [BAG ...] [--params FILE]
 
 For each simulated BAG: detect, chain, give every slice the real object that explains it
 (the oracle of `objslam map --association oracle`), and take each slice's error at the
@@ -10,7 +10,7 @@ noise away; their standard deviation is printed beside it); printed per object w
 mean over the bag's objects (a bias all of them share), then the root mean square over
 the objects of all BAGs per component: the bias share of objslam_mapper.graph.error_covariance
 (the stddev of an error common to all slices of an object, in units of the slices'
-configured stddev). A measurement of the detector, not part of the package.
+configured stddev). A measurement of the detector on simulated bags.
 """
 
 from __future__ import annotations
@@ -48,12 +48,16 @@ def object_biases(bag_path: str, config: MapperConfig) -> list[tuple[str, int, n
     return out
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("bags", nargs="+")
-    parser.add_argument("--params", default=str(default_config_dir() / "mapper.yaml"))
-    args = parser.parse_args()
-    config = load_config(MapperConfig, args.params, "mapper")
+DESCRIPTION = "the detector's per-object bias: the defaults of solver.error_covariance.*_bias_share"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bags", nargs="+", metavar="BAG", help="simulated bags (with ground truth)")
+    parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
+
+
+def run(args: argparse.Namespace) -> int:
+    config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
     means = []
     header = "  ".join(f"{c:>16s}" for c in COMPONENTS)
     for bag in args.bags:
@@ -70,7 +74,4 @@ def main() -> None:
     rms = np.sqrt(np.mean(np.square(means), axis=0))
     print(f"bias share (root mean square of the means over {len(means)} objects):")
     print("  " + "  ".join(f"{c} {v:.3f}" for c, v in zip(COMPONENTS, rms, strict=True)))
-
-
-if __name__ == "__main__":
-    main()
+    return 0

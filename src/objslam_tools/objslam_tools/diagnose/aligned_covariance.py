@@ -1,6 +1,6 @@
 """Covariance of the object errors that `objslam eval` measures, on an oracle map (issue 4's NEES).
 
-Usage: python scripts/aligned_covariance.py BAG [--params FILE]
+Usage: objslam diagnose aligned-covariance BAG [--params FILE]
 
 `objslam eval` aligns the map to the ground truth by a least-squares SE(2) fit of the
 trajectory before it measures object errors; a map's covariances are about the trajectory
@@ -14,8 +14,7 @@ exactly the error `objslam eval` measures. Per object it prints that error, the 
 marginal standard deviations and the aligned ones, and how well the aligned major axis
 lines up with the direction from the trajectory's centre (|cos| = 1: radial, a scale
 mode); then the mean NEES both ways, and the NEES of all objects at once with their
-correlations (which a mean of per-object NEES ignores). A diagnostic for the README's NEES discussion, not
-part of the package.
+correlations (which a mean of per-object NEES ignores). A diagnostic of the reported covariances (docs/method.md).
 """
 
 from __future__ import annotations
@@ -64,13 +63,17 @@ def alignment_jacobian(track_xy: np.ndarray, point_xy: np.ndarray, n_variables: 
     return jacobian
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("bag")
-    parser.add_argument("--params", default=str(default_config_dir() / "mapper.yaml"))
-    args = parser.parse_args()
+DESCRIPTION = "covariance of the object errors objslam eval measures, on the oracle map (NEES, joint NEES)"
 
-    config = load_config(MapperConfig, args.params, "mapper")
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", metavar="BAG", help="a simulated bag (with ground truth)")
+    parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
+
+
+def run(args: argparse.Namespace) -> int:
+
+    config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
     # One graph pose per image: the fit below is over the poses the map reports.
     keyframes = dataclasses.replace(config.solver.keyframes, enabled=False)
     config = dataclasses.replace(config, solver=dataclasses.replace(config.solver, backend="fast", keyframes=keyframes))
@@ -115,7 +118,4 @@ def main() -> None:
     joint = float(error @ np.linalg.solve(stacked @ covariance @ stacked.T, error))
     low, high = chi2.ppf([0.025, 0.975], len(error))
     print(f"  joint NEES xy, aligned, all objects: {joint:.1f}  95 % band [{low:.1f}, {high:.1f}] ({len(error)} dof)")
-
-
-if __name__ == "__main__":
-    main()
+    return 0

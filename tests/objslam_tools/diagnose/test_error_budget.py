@@ -1,21 +1,14 @@
-"""scripts/error_budget.py: the parts of an oracle map's object errors add up to the errors."""
+"""`objslam diagnose error-budget`: the parts of an oracle map's object errors add up to the errors."""
 
 from __future__ import annotations
-
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, simulate_run
+from objslam_tools.diagnose import error_budget
 from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, STEP_NS, draw_scene
-
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "error_budget.py"
-_spec = importlib.util.spec_from_file_location("error_budget", SCRIPT)
-error_budget = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(error_budget)
 
 
 def test_the_parts_add_up_to_the_errors_about_the_trajectory():
