@@ -8,7 +8,7 @@ RUN := source env.sh &&
 
 help:
 	@echo "make demo   set up (if needed) and build the map of bags/office"
-	@echo "make test   set up (if needed), lint, and run the whole test suite"
+	@echo "make test   set up (if needed), lint and type-check, and run the whole test suite"
 	@echo "make setup  only set up .venv and the colcon workspace"
 
 setup:
@@ -18,7 +18,7 @@ demo: setup
 	@$(RUN) scripts/demo.sh
 
 lint: setup
-	@$(RUN) ruff check src tests scripts && ruff format --check src tests scripts
+	@$(RUN) ruff check src tests scripts && ruff format --check src tests scripts && mypy
 
 test: lint
 	@$(RUN) python -m pytest

@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
-
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, Room, Table
 from objslam_tools.silhouette import VisibleObject, visible_objects
 from objslam_tools.sim import Renderer, Scene

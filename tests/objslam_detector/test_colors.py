@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+
 from objslam_common.catalog import load_catalog
 from objslam_common.config import from_mapping
 from objslam_common.errors import ConfigError
-
 from objslam_detector import ColorConfig, DetectorConfig
 from objslam_detector.colors import classify, derive_gates, hue_distance_deg, lookup_tables, parse_class_overrides
 

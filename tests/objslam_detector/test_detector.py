@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_common.geometry import wrap_angle
 from objslam_common.records import SliceMeasurement
-
 from objslam_detector import Detector
 from tests.objslam_detector.conftest import CATALOG, expected, place, render, scene_of, table_for
 

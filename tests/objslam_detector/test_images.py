@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from objslam_common.cameras.unified import DEFAULT_CAMERA
 
+from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_detector import Detector, DetectorInputError, decode_compressed, image_from_buffer
 from objslam_detector.errors import CORRUPT_COMPRESSED, EMPTY_IMAGE, SIZE_MISMATCH, UNSUPPORTED_ENCODING
 from tests.objslam_detector.conftest import place, render, scene_of

@@ -6,10 +6,10 @@ import dataclasses
 import math
 
 import numpy as np
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_common.config import default_config_dir, flatten, load_config
 from objslam_common.records import SliceMeasurement
-
 from objslam_detector import Detector, DetectorConfig, draw_slices
 from tests.objslam_detector.conftest import place, render, scene_of
 

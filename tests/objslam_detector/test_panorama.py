@@ -7,8 +7,8 @@ import math
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from objslam_common.cameras.unified import DEFAULT_CAMERA
 
+from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_detector import PanoramaConfig
 from objslam_detector.blobs import seam_shift
 from objslam_detector.panorama import Panorama, highest_visible_elevation

@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import wrap_angle
 from objslam_common.records import ImageSlices, SliceMeasurement
-
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.problem import GraphProblem, build_problem
 from objslam_mapper.synthetic import SyntheticObject, SyntheticRun, simulate_run

@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import rotation, transform_points
-
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.solver import GraphSolution, ObjectEstimate
 from objslam_mapper.synthetic import SyntheticObject, SyntheticRun

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from objslam_common.catalog import load_catalog
 
+from objslam_common.catalog import load_catalog
 from objslam_mapper.config import SamplerConfig
 from objslam_mapper.inference.baselines import (
     BaselineError,

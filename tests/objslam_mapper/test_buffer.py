@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
 
 SLICE = SliceMeasurement("red", 1.0, 0.1, 0.05, -0.2, 0.1)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.errors import CameraModelError
 from objslam_common.mount import CameraMount

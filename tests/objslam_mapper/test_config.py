@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import pytest
+
 from objslam_common.config import flatten, from_mapping, load_config, setting, unflatten
 from objslam_common.errors import ConfigError
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
-
 from objslam_mapper.config import DetectionConfig, GraphConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.detection import (

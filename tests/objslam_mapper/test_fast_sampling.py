@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from objslam_common.catalog import load_catalog
 
+from objslam_common.catalog import load_catalog
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.graph.solver import solve
@@ -130,7 +130,6 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
 
 def _whitened_residuals(problem, poses, group, state):
     from objslam_common.geometry import wrap_angle
-
     from objslam_mapper.model.slice_model import censor, predict_reduced
 
     label = int(problem.measurement_label[group[0]])

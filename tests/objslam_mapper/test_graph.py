@@ -12,12 +12,12 @@ import math
 import gtsam
 import numpy as np
 import pytest
-from objslam_common.config import load_config
-from objslam_common.geometry import between, wrap_angle
-from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
+from objslam_common.config import load_config
+from objslam_common.geometry import between, wrap_angle
+from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.config import GraphConfig, MapperConfig, OdometryNoiseConfig, SolverConfig
 from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
 from objslam_mapper.graph.initialization import initial_object

@@ -14,11 +14,11 @@ import math
 import gtsam
 import numpy as np
 import pytest
+
 from objslam_common.catalog import load_catalog
 from objslam_common.config import from_mapping, load_config
 from objslam_common.errors import ConfigError
 from objslam_common.records import ImageSlices
-
 from objslam_mapper.config import GraphConfig, KeyframeConfig, MapperConfig, SolverConfig
 from objslam_mapper.graph import gtsam_backend
 from objslam_mapper.graph.backends import solve_with_backend

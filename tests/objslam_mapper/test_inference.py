@@ -6,9 +6,9 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import between, wrap_angle
-
 from objslam_mapper.config import ClutterConfig, DetectionConfig, MapperConfig, MoveConfig, SamplerConfig
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations

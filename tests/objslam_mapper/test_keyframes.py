@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import compose
 from objslam_common.mount import CameraMount, CameraMounts
-
 from objslam_mapper.config import GraphConfig, KeyframeConfig, SolverConfig
 from objslam_mapper.graph.keyframes import keyframes_of, offset_slice_variance, select_keyframes
 from objslam_mapper.graph.problem import build_problem, gaussian_log_normalizer

@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 
 import pytest
-from objslam_common.catalog import load_catalog
-from objslam_common.ros.conversions import time_from_ns
 from visualization_msgs.msg import Marker
 
+from objslam_common.catalog import load_catalog
+from objslam_common.ros.conversions import time_from_ns
 from objslam_mapper.map_file import BuiltMap, MappedObject, TrajectoryPose
 from objslam_mapper.ros.map_messages import to_marker_array, to_object_map, to_path
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from objslam_common.catalog import load_catalog
-from objslam_common.geometry import between, wrap_angle
 from scipy.stats import chi2
 
+from objslam_common.catalog import load_catalog
+from objslam_common.geometry import between, wrap_angle
 from objslam_mapper.config import GraphConfig, OdometryCalibrationConfig
 from objslam_mapper.graph.covariance import object_covariance
 from objslam_mapper.graph.factorize import factorize

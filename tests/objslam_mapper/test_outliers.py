@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from objslam_common.catalog import load_catalog
 from objslam_common.records import ImageSlices
-
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.problem import build_problem, gaussian_log_normalizer
 from objslam_mapper.graph.solver import solve

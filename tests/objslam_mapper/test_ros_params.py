@@ -6,10 +6,11 @@ from dataclasses import dataclass
 
 import pytest
 import rclpy
+from rclpy.parameter import Parameter
+
 from objslam_common.config import setting
 from objslam_common.errors import ConfigError
 from objslam_common.ros.params import declare_config
-from rclpy.parameter import Parameter
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+
 from objslam_common.geometry import wrap_angle
 from objslam_common.mount import CameraMount
-
 from objslam_mapper.model.slice_model import (
     BEARING,
     ELEVATION_BOTTOM,

@@ -6,9 +6,9 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from objslam_common.catalog import load_catalog
 from objslam_common.records import ImageSlices, SliceMeasurement
-
 from objslam_mapper.config import GraphConfig, TrackletConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.tracklets import (

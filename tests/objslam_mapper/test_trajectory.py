@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from objslam_common.geometry import compose, interpolate_pose, wrap_angle
 from objslam_common.records import OdometrySample
-
 from objslam_mapper.config import OdometryNoiseConfig
 from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 

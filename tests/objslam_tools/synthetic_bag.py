@@ -7,10 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from objslam_common.cameras.unified import UnifiedCamera
-from objslam_common.geometry import quaternion_from_yaw
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
+
+from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.geometry import quaternion_from_yaw
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 _T = TS.types

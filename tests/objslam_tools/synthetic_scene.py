@@ -6,11 +6,11 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import wrap_angle
 from objslam_common.mount import CameraMount
-
 from objslam_mapper.map_file import BuiltMap, MappedObject, TrajectoryPose
 from objslam_mapper.model.slice_model import predict_slices
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, write_ground_truth

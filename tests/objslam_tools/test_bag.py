@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from objslam_common.cameras.unified import UnifiedCamera
 
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_tools.bag import ImageFrame, decode_rgb, open_bag
 from objslam_tools.errors import UserError
 from tests.objslam_tools.synthetic_bag import (

@@ -125,7 +125,6 @@ def test_cached_detections_are_keyed_on_the_detector():
     import dataclasses
 
     from objslam_common.catalog import load_catalog
-
     from objslam_detector.config import DetectorConfig
     from objslam_tools.bench.mapper import detector_fingerprint
 

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 import pytest
+
 from objslam_common.mount import CameraMount
 from objslam_common.records import SliceMeasurement
-
 from objslam_detector import Detector
 from objslam_tools.cli import main
 from objslam_tools.detector_eval import (

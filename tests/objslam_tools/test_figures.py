@@ -65,7 +65,6 @@ def test_chosen_frames(bag_dir, tmp_path):
 def test_overlay_outline_encloses_the_rendered_object(bag_dir):
     """The sector the overlay draws covers the pixels the (ground-truth) renderer painted."""
     from objslam_common.mount import CameraMount
-
     from objslam_mapper.model.slice_model import predict_slices
 
     frame = next(open_bag(bag_dir).images())

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, SliceMeasurement
-
 from objslam_mapper.model.slice_model import predict_slices
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject
 from objslam_tools.oracle import OracleOptions, oracle_assignment, truth_residual_chi2

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
-
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.model.slice_model import predict_slices

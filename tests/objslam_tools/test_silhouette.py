@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
-
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject, Room, Table
 from objslam_tools.silhouette import view_top_elevation, visible_objects
 from objslam_tools.sim import Renderer, Scene

@@ -10,11 +10,11 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from objslam_common.catalog import load_catalog
-from objslam_common.mount import CameraMount
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
+from objslam_common.catalog import load_catalog
+from objslam_common.mount import CameraMount
 from objslam_tools.ground_truth import load_ground_truth
 from objslam_tools.sim.motion import OdometryNoise
 

@@ -12,10 +12,10 @@ import colorsys
 import cv2
 import numpy as np
 import pytest
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
-
 from objslam_tools.ground_truth import Distractor, GroundTruthObject, Room, Table
 from objslam_tools.sim import Renderer, Scene, build_scenario, render_frame
 from objslam_tools.sim.scene import SIGN_POST_RADIUS_M

@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
-from objslam_common.catalog import load_catalog
 
+from objslam_common.catalog import load_catalog
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import (
     GroundTruth,

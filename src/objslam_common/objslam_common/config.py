@@ -122,7 +122,7 @@ def _coerce(name: str, value: Any, annotation: Any, meta: dict[str, Any]) -> Any
     if dataclasses.is_dataclass(annotation):
         if not isinstance(value, dict):
             raise ConfigError(f"'{name}' must be a mapping")
-        return from_mapping(annotation, value, prefix=f"{name}.")
+        return from_mapping(typing.cast(type, annotation), value, prefix=f"{name}.")
     if annotation is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"'{name}' must be true or false, got {value!r}")

@@ -7,12 +7,20 @@ Poses are named ``a_T_b``: the pose of frame b expressed in frame a, so that
 
 from __future__ import annotations
 
+from typing import Any, overload
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 _TWO_PI = 2.0 * np.pi
 
 
+@overload
+def wrap_angle(angle_rad: float) -> float: ...
+@overload
+def wrap_angle(angle_rad: NDArray[Any]) -> NDArray[np.float64]: ...
+@overload
+def wrap_angle(angle_rad: ArrayLike) -> NDArray[np.float64] | float: ...
 def wrap_angle(angle_rad: ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angles to [-pi, pi). Works on scalars and arrays."""
     angle = np.asarray(angle_rad, dtype=float)

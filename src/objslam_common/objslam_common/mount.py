@@ -73,7 +73,7 @@ class CameraMounts:
             yaw_rad=pose[:, 2] + mount.yaw_rad,
         )
 
-    def take(self, index: ArrayLike) -> CameraMounts:
+    def take(self, index: NDArray[np.int64]) -> CameraMounts:
         """The mounts of measurements ``index``."""
         return CameraMounts(self.height_m, self.offset_x_m[index], self.offset_y_m[index], self.yaw_rad[index])
 

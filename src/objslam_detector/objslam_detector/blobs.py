@@ -89,7 +89,7 @@ class Segmenter:
 
     def _class_components(self, k: int, mask: NDArray[np.bool_], x: int, y: int) -> list[Blob]:
         count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8), connectivity=8)
-        out = []
+        out: list[Blob] = []
         for j in range(1, count):
             bx, by, bw, bh, area = (int(v) for v in stats[j])
             if area >= self.config.min_pixel_count:

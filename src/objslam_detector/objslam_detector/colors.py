@@ -12,7 +12,7 @@ from __future__ import annotations
 import colorsys
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -20,7 +20,6 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from objslam_common.catalog import Catalog
-
     from objslam_detector.config import ColorConfig
 
 OVERRIDE_KEYS = ("hue_deg", "hue_halfwidth_deg", "min_saturation", "min_value")
@@ -61,7 +60,7 @@ class ColorGate:
         self, hue: NDArray[np.uint8], saturation: NDArray[np.uint8], value: NDArray[np.uint8]
     ) -> NDArray[np.uint8]:
         """255 where the planes of a ``COLOR_*2HSV_FULL`` image pass the gate, else 0."""
-        result = None
+        result: NDArray[np.uint8] | None = None
         for h_lo, h_hi in self.hue_ranges():
             part = cv2.inRange(hue, h_lo, h_hi)
             result = part if result is None else cv2.bitwise_or(result, part)
@@ -69,6 +68,8 @@ class ColorGate:
             level = int(np.ceil(floor * 255.0))
             if level > 0:
                 result = cv2.bitwise_and(result, cv2.threshold(plane, level - 1, 255, cv2.THRESH_BINARY)[1])
+        if result is None:
+            raise ValueError(f"colour gate {self.label!r} has no hue range")
         return result
 
 
@@ -160,5 +161,6 @@ def derive_gates(catalog: Catalog, config: ColorConfig) -> tuple[ColorGate, ...]
     for label, values in parse_class_overrides(config.class_overrides).items():
         if label not in gates:
             raise ValueError(f"class override for {label!r}: no such class in the catalog ({', '.join(gates)})")
-        gates[label] = replace(gates[label], **values)
+        changes: dict[str, Any] = dict(values)
+        gates[label] = replace(gates[label], **changes)
     return tuple(gates.values())

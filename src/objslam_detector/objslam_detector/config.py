@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from objslam_common.config import setting
-
 from objslam_detector.colors import parse_class_overrides
 
 

@@ -13,11 +13,11 @@ from collections import OrderedDict
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.errors import ConfigError
 from objslam_common.records import SliceMeasurement
-
 from objslam_detector.blobs import Blob, Segmenter, clean, strip
 from objslam_detector.colors import ColorGate, classify, derive_gates
 from objslam_detector.config import DetectorConfig

@@ -11,8 +11,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.cameras.unified import UnifiedCamera
 
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_detector.errors import (
     CORRUPT_COMPRESSED,
     EMPTY_IMAGE,

@@ -88,7 +88,7 @@ def separate(mask: NDArray[np.bool_], horizon_row: float, cut: bool = False) -> 
     split = _split(mask, edges, horizon_row)
     if split is None:
         return [Part(0, 0, mask, cut)]
-    parts = []
+    parts: list[Part] = []
     for piece, far in zip(split, (False, True), strict=True):
         used_rows = np.flatnonzero(piece.any(axis=1))
         used_cols = np.flatnonzero(piece.any(axis=0))

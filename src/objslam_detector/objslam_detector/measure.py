@@ -16,10 +16,10 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_common.records import SliceMeasurement
-
 from objslam_detector.blobs import Blob, strip
 from objslam_detector.panorama import Panorama
 
@@ -122,7 +122,7 @@ def silhouette_edges(
 
 
 def _extreme(
-    columns: NDArray[np.float64],
+    columns: NDArray[np.floating],
     edge: NDArray[np.float64],
     binary: float,
     sides: tuple[float, float],

@@ -7,9 +7,9 @@ from collections.abc import Iterable, Mapping
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.records import SliceMeasurement
-
 from objslam_detector.images import as_color_image
 
 _DEFAULT_RGB = (255, 255, 255)

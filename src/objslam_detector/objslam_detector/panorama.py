@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import wrap_angle
-
 from objslam_detector.config import PanoramaConfig
 
 # Stay this far below the model's limit elevation asin(xi), where radii blow up.
@@ -69,7 +69,7 @@ class Panorama:
         """Elevation of a row edge coordinate (0 = top edge of row 0)."""
         return self.top_elevation_rad - np.asarray(row_edge, dtype=float) * self.elevation_step_rad
 
-    def column_of_azimuth(self, azimuth_rad: float | NDArray) -> NDArray:
+    def column_of_azimuth(self, azimuth_rad: float | NDArray) -> float | NDArray:
         """Column edge coordinate of an azimuth, in [0, cols)."""
         return (wrap_angle(azimuth_rad) + math.pi) / self.azimuth_step_rad
 

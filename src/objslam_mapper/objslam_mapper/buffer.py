@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from objslam_common.records import ImageSlices, OdometrySample
-
 from objslam_mapper.errors import MapperError
 
 logger = logging.getLogger(__name__)
@@ -94,7 +94,10 @@ class InputBuffer:
             )
             # The stream that went back is delivered in order, so only the other one can
             # still bring messages of the old lap.
-            streams = {ODOMETRY: self.odometry, SLICES: self.images}
+            streams: dict[str, Sequence[OdometrySample] | Sequence[ImageSlices]] = {
+                ODOMETRY: self.odometry,
+                SLICES: self.images,
+            }
             old_lap_end = {s: d[-1].stamp_ns for s, d in streams.items() if s != stream and d}
             self.clear()
             self._old_lap_end_ns = old_lap_end

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 import yaml
-from objslam_common.config import read_yaml
 
+from objslam_common.config import read_yaml
 from objslam_mapper.errors import MapperError
 
 logger = logging.getLogger(__name__)

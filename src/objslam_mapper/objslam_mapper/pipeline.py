@@ -7,7 +7,6 @@ from collections.abc import Sequence
 
 from objslam_common.catalog import Catalog
 from objslam_common.records import ImageSlices, OdometrySample
-
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.diagnostics import PhaseProgress

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.geometry import between, compose, wrap_angle
 from objslam_common.mount import CameraMount
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
-
 from objslam_mapper.config import GraphConfig
 from objslam_mapper.graph.problem import GraphProblem, class_measurement_stddev
 from objslam_mapper.model.odometry import increment_stddev, poses_at_stamps
@@ -84,7 +84,7 @@ def office_scene() -> tuple[SyntheticObject, ...]:
     return tuple(SyntheticObject(label, loc, size) for label, loc, size in specs)
 
 
-def _samples(stamps_ns: Sequence[int], poses: Sequence[NDArray]) -> tuple[OdometrySample, ...]:
+def _samples(stamps_ns: Sequence[int], poses: Sequence[NDArray] | NDArray) -> tuple[OdometrySample, ...]:
     return tuple(OdometrySample(s, *map(float, p[:3])) for s, p in zip(stamps_ns, poses, strict=True))
 
 
@@ -148,7 +148,7 @@ def simulate_run(
         for j, (bearing, width, bottom, top) in zip(seen, values, strict=True):
             slices.append(
                 SliceMeasurement(
-                    label=objects[j].label,
+                    label=objects[int(j)].label,
                     confidence=1.0,
                     bearing_rad=float(wrap_angle(bearing)),
                     angular_width_rad=float(max(width, 1e-4)),

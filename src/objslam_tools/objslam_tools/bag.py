@@ -28,15 +28,15 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.cameras.unified import UnifiedCamera
-from objslam_common.errors import CameraModelError
-from objslam_common.geometry import yaw_from_quaternion
-from objslam_common.ros.conversions import camera_from_info
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import ReaderError
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 
+from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.errors import CameraModelError
+from objslam_common.geometry import yaw_from_quaternion
+from objslam_common.ros.conversions import camera_from_info
 from objslam_tools.errors import UserError
 from objslam_tools.trajectory import PoseTrack
 

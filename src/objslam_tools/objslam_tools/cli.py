@@ -16,7 +16,6 @@ import pkgutil
 import sys
 
 from objslam_common.errors import ObjslamError
-
 from objslam_tools import commands
 
 USER_ERROR_EXIT = 2

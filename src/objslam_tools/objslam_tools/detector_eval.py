@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_common.records import SliceMeasurement
-from scipy.optimize import linear_sum_assignment
-
 from objslam_detector import Detector, DetectorInputError, decode_compressed, draw_slices
 from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC, ImageFrame, open_bag
 from objslam_tools.errors import UserError

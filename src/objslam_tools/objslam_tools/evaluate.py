@@ -33,10 +33,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.geometry import rotation
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
+from objslam_common.geometry import rotation
 from objslam_mapper.map_file import BuiltMap, MappedObject
 from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC, ODOM_TOPIC, open_bag
 from objslam_tools.errors import UserError

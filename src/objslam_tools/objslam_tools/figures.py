@@ -27,10 +27,10 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Ellipse, Patch
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.mount import CameraMount
-
 from objslam_mapper.map_file import BuiltMap, MappedObject
 from objslam_mapper.model.slice_model import predict_slices
 from objslam_tools.bag import Bag, ImageFrame, decode_rgb, open_bag

@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 import yaml
 from numpy.typing import NDArray
-from objslam_common.mount import CameraMount
 
+from objslam_common.mount import CameraMount
 from objslam_tools.errors import UserError
 
 GROUND_TRUTH_FILE = "ground_truth.yaml"

@@ -12,7 +12,6 @@ from collections.abc import Callable
 
 from objslam_common.records import ImageSlices, OdometrySample
 from objslam_common.ros.conversions import odometry_sample
-
 from objslam_detector.detector import Detector
 from objslam_tools.bag import ODOM_TOPIC, ODOMETRY_TYPE, Bag
 from objslam_tools.detector_eval import frame_pixels

@@ -44,11 +44,11 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.geometry import wrap_angle
-from objslam_common.mount import CameraMount
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
+from objslam_common.geometry import wrap_angle
+from objslam_common.mount import CameraMount
 from objslam_mapper.model.slice_model import (
     BEARING,
     ELEVATION_BOTTOM,

@@ -21,10 +21,10 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+
 from objslam_common.catalog import Catalog
 from objslam_common.config import load_config
 from objslam_common.records import ImageSlices, OdometrySample
-
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_mapper.config import MapperConfig

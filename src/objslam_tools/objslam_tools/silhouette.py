@@ -25,8 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.cameras.unified import UnifiedCamera
 
+from objslam_common.cameras.unified import UnifiedCamera
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_slices
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject
 from objslam_tools.sim.scene import SIGN_POST_RADIUS_M

@@ -87,18 +87,18 @@ class UnifiedCamera:
         """Build from the fields of sensor_msgs/CameraInfo (passed as plain values)."""
         if distortion_model != "unified":
             raise CameraModelError(f"distortion_model must be 'unified', got {distortion_model!r}")
-        d = list(d)
-        k = list(k)
-        if len(d) < 1 or len(k) != 9:
-            raise CameraModelError(f"expected d=[xi] and 9 values of k, got d={d}, k of length {len(k)}")
+        d_values = [float(v) for v in np.asarray(d, dtype=float).reshape(-1)]
+        k_values = [float(v) for v in np.asarray(k, dtype=float).reshape(-1)]
+        if len(d_values) < 1 or len(k_values) != 9:
+            raise CameraModelError(f"expected d=[xi] and 9 values of k, got d={d_values}, k of length {len(k_values)}")
         return cls(
             width_px=int(width),
             height_px=int(height),
-            xi=float(d[0]),
-            fx=float(k[0]),
-            fy=float(k[4]),
-            cx=float(k[2]),
-            cy=float(k[5]),
+            xi=d_values[0],
+            fx=k_values[0],
+            fy=k_values[4],
+            cx=k_values[2],
+            cy=k_values[5],
         )
 
 

@@ -18,6 +18,10 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.catalog import load_catalog
 from objslam_common.errors import CameraModelError
@@ -25,10 +29,6 @@ from objslam_common.records import ImageSlices, SliceMeasurement
 from objslam_common.ros.conversions import camera_from_info, slice_array_to_msg, stamp_ns
 from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
-from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image
-
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_detector.errors import DetectorInputError
@@ -142,6 +142,8 @@ class DetectorNode(Node):
             self._publish_debug(header, image, encoding, slices)
 
     def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[SliceMeasurement]) -> None:
+        if self.camera is None or self.debug_pub is None:
+            return
         drawn = draw_slices(image, slices, self.camera, encoding, self.class_rgb)
         msg = Image(
             header=header, height=drawn.shape[0], width=drawn.shape[1], encoding="rgb8", step=drawn.shape[1] * 3

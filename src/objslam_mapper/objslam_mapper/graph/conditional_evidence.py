@@ -23,17 +23,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from objslam_mapper.graph.linearize import OBJECT_COLUMNS
 from objslam_mapper.graph.problem import LOG_2PI, OBJECT_DIM, GraphProblem
 from objslam_mapper.model.outliers import WARM_START_CAP_SCALES, half_chi2, truncate
 from objslam_mapper.model.slice_model import predict_reduced, whitened_slice_error
 
-# The object's 5 variables enter predict_reduced's 6 reduced columns (delta_x, delta_y,
-# theta, z_base, d, H) through these (location x, y as +delta).
-_OBJECT_COLUMNS = np.array([0, 1, 3, 4, 5])
 _MAX_LAMBDA = 1e8
 
 
@@ -45,6 +44,20 @@ class ObjectEvidence:
     object_state: NDArray[np.float64]
     iterations: int
     converged: bool
+
+
+class ObjectLinearization(NamedTuple):
+    """One object's cost, gradient (5,) and Gauss-Newton information (5, 5) at fixed poses."""
+
+    cost: float
+    grad: NDArray[np.float64]
+    info: NDArray[np.float64]
+    outliers: int  # slices beyond their true cap
+
+    @property
+    def valid(self) -> bool:
+        """False where the model is undefined (a pose inside the object)."""
+        return len(self.grad) > 0
 
 
 class _ObjectSystem:
@@ -68,25 +81,25 @@ class _ObjectSystem:
             problem.prior_log_normalizer[row]
         )
 
-    def linearize(self, state: NDArray[np.float64]) -> tuple[float, NDArray | None, NDArray | None, int]:
-        """(cost, gradient, Gauss-Newton information, slices beyond their true cap); cost inf
-        where the model is undefined."""
+    def linearize(self, state: NDArray[np.float64]) -> ObjectLinearization:
+        """Cost, gradient, Gauss-Newton information and slices beyond their true cap; not
+        ``valid`` where the model is undefined."""
         pred = predict_reduced(self.poses, state[:3], state[3:], self.mount)
         if not np.all(pred.valid):
-            return math.inf, None, None, len(self.z[0])
+            return ObjectLinearization(math.inf, np.zeros(0), np.zeros((0, 0)), len(self.z[0]))
         res, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.censored_top)
         half = half_chi2(res)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
         if self.has_outlier_model and self.cap_scale < np.inf:
             weight = weight * truncate(res, self.outlier_cost * self.cap_scale, half)
-        jac = pred.jacobian[:, _OBJECT_COLUMNS] * weight[:, None, :]  # (4, 5, A)
+        jac = pred.jacobian[:, OBJECT_COLUMNS] * weight[:, None, :]  # (4, 5, A)
         prior = (state - self.prior_mean) * self.prior_inv_sigma
         cost = 0.5 * float(np.sum(res * res) + prior @ prior)
         flat = jac.transpose(1, 0, 2).reshape(OBJECT_DIM, -1)
         info = flat @ flat.T
         info[np.diag_indices(OBJECT_DIM)] += self.prior_inv_sigma**2
         grad = flat @ res.ravel() + prior * self.prior_inv_sigma
-        return cost, grad, info, outliers
+        return ObjectLinearization(cost, grad, info, outliers)
 
 
 def object_information(
@@ -97,7 +110,8 @@ def object_information(
     prior: int | None = None,
 ) -> NDArray[np.float64] | None:
     """(5, 5) information of one object at ``state`` with the poses fixed (None where undefined)."""
-    return _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64), prior).linearize(state)[2]
+    linearized = _ObjectSystem(problem, poses, np.asarray(group, dtype=np.int64), prior).linearize(state)
+    return linearized.info if linearized.valid else None
 
 
 def object_evidence(
@@ -129,7 +143,7 @@ def object_evidence(
             break
         system.cap_scale = scale
         linearized = system.linearize(state)
-        if linearized[1] is None:
+        if not linearized.valid:
             return ObjectEvidence(-math.inf, state, 0, False)
         state, linearized, more, converged = _minimize(system, state, linearized, max_iterations, tolerances)
         cost, _, info, outliers = linearized
@@ -144,10 +158,10 @@ def object_evidence(
 def _minimize(
     system: _ObjectSystem,
     state: NDArray[np.float64],
-    linearized: tuple[float, NDArray, NDArray, int],
+    linearized: ObjectLinearization,
     max_iterations: int,
     tolerances: tuple[float, float],
-) -> tuple[NDArray[np.float64], tuple[float, NDArray, NDArray, int], int, bool]:
+) -> tuple[NDArray[np.float64], ObjectLinearization, int, bool]:
     """Levenberg-Marquardt from a valid ``state`` and its ``linearized`` (as
     ``_ObjectSystem.linearize``): (state, its linearization, linearizations, converged)."""
     absolute_tolerance, relative_tolerance = tolerances
@@ -169,7 +183,7 @@ def _minimize(
         new_state = state + step
         new = system.linearize(new_state)
         iterations += 1
-        if new[1] is not None and new[0] <= cost:
+        if new.valid and new.cost <= cost:
             state, linearized = new_state, new
             cost, grad, info, _ = new
             damping = 0.0 if damping < 1e-3 else damping / 10.0

@@ -119,8 +119,15 @@ def white_weights(group: NoiseGroup, inverse: NDArray[np.float64]) -> NDArray[np
 
 def owner_rows(group: NoiseGroup, values: NDArray[np.float64]) -> scipy.sparse.csr_matrix:
     """(G, m): row j holds ``values`` (m,) on the rows of object j and zeros elsewhere."""
+    owner = _owners(group)
     m = len(group.residual)
-    return scipy.sparse.csr_matrix((values, (group.owner, np.arange(m))), shape=(int(group.owner.max()) + 1, m))
+    return scipy.sparse.csr_matrix((values, (owner, np.arange(m))), shape=(int(owner.max()) + 1, m))
+
+
+def _owners(group: NoiseGroup) -> NDArray[np.int64]:
+    if group.owner is None:
+        raise ValueError(f"noise group {group.name} has no objects")
+    return group.owner
 
 
 def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -139,10 +146,11 @@ def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArra
     of the objects of a synthetic run at the configured bias got more, and the oracle maps'
     covariances were pessimistic (``twins`` mean NEES xyz 1.66 against a band from 1.73).
     """
-    owners = int(group.owner.max()) + 1
-    count = np.maximum(np.bincount(group.owner, minlength=owners).astype(float), 1.0)
-    mean = np.bincount(group.owner, weights=group.residual, minlength=owners) / count
-    white = np.bincount(group.owner, weights=weights, minlength=owners) / count
+    owner = _owners(group)
+    owners = int(owner.max()) + 1
+    count = np.maximum(np.bincount(owner, minlength=owners).astype(float), 1.0)
+    mean = np.bincount(owner, weights=group.residual, minlength=owners) / count
+    white = np.bincount(owner, weights=weights, minlength=owners) / count
     totals = (owner_rows(group, np.ones(len(group.residual))) @ group.jacobian).toarray()  # g_j
     visible = np.clip(1.0 - np.sum((totals @ inverse) * totals, axis=1) / count, MIN_VISIBLE, 1.0)
     own = (mean**2 - white / count) / visible**2

@@ -89,7 +89,9 @@ def sparse_information(system: AssociationSystem, lin: Linearization, damping: f
     Rows: poses, objects, calibration.
     """
     pattern = system.layout.sparse
-    data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices))
+    data = np.bincount(pattern.slot, weights=_sparse_values(lin), minlength=len(pattern.indices)).astype(
+        float, copy=False
+    )
     if damping > 0.0:
         data[pattern.diagonal_slots] *= 1.0 + damping
     return scipy.sparse.csc_matrix((data, pattern.indices, pattern.indptr), shape=(pattern.dimension,) * 2)
@@ -210,6 +212,7 @@ def dense_inverse_columns(system: AssociationSystem, fac: Factorization, first: 
     split = POSE_DIM * system.n_poses
     unit = np.zeros((split + OBJECT_DIM * system.n_objects + system.n_calib, count))
     unit[split + first : split + first + count] = np.eye(count)
+    assert fac.sparse_lu is not None  # neither dense nor sparse: not a factorization of this module
     return fac.sparse_lu.solve(unit)[split + first : split + first + count]
 
 
@@ -224,6 +227,7 @@ def solve_pose_rhs(system: AssociationSystem, fac: Factorization, rhs_pose: NDAr
         rhs = np.zeros((POSE_DIM * system.n_poses + OBJECT_DIM * system.n_objects + system.n_calib, rhs_pose.shape[1]))
         rhs[: len(rhs_pose)] = rhs_pose
         return fac.sparse_lu.solve(rhs)
+    assert fac.chol_pose is not None and fac.w_cross is not None  # the dense path's
     z, info = lapack.dtbtrs(fac.chol_pose, rhs_pose, uplo="U", trans="T")
     if info != 0:
         raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")

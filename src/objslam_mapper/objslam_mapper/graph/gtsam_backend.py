@@ -59,8 +59,8 @@ from typing import Literal
 import gtsam
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.geometry import wrap_angle
 
+from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import SolverConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.gauge import GAUGE_DIM, about_trajectory, trajectory_gauge
@@ -185,9 +185,9 @@ def _set_pose_jacobians(jacobians: list, n_keys: int, *blocks: tuple[NDArray[np.
     groups = np.arange(count)
     for block, key_of in blocks:
         full[groups, :, key_of, :] += block
-    full = full.reshape(count * rows, n_keys * POSE_DIM)
+    flat = full.reshape(count * rows, n_keys * POSE_DIM)
     for k in range(n_keys):
-        jacobians[k] = full[:, POSE_DIM * k : POSE_DIM * (k + 1)]
+        jacobians[k] = flat[:, POSE_DIM * k : POSE_DIM * (k + 1)]
 
 
 # -- factors ------------------------------------------------------------------------------------

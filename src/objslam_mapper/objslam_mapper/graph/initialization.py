@@ -16,10 +16,8 @@ height and size start at the class prior.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, camera_positions
@@ -48,9 +46,7 @@ def _range_from_edge(
     return np.where(usable, dist, np.nan), np.where(usable, var, np.inf)
 
 
-def initial_object(
-    problem: GraphProblem, indices: Sequence[int], map_T_base: NDArray[np.float64]
-) -> NDArray[np.float64]:
+def initial_object(problem: GraphProblem, indices: ArrayLike, map_T_base: NDArray[np.float64]) -> NDArray[np.float64]:
     """Starting (x, y, z_base, diameter, height) of an object seen by ``indices``."""
     idx = np.asarray(indices, dtype=np.int64)
     label = int(problem.measurement_label[idx[0]])

@@ -52,9 +52,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
 from objslam_common.geometry import between_rows, compose_rows
 from objslam_common.mount import CameraMounts
-
 from objslam_mapper.config import KeyframeConfig
 from objslam_mapper.graph.problem import GraphProblem, gaussian_log_normalizer, read_only
 from objslam_mapper.model.odometry import increment_stddev as increment_stddev_of

@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.geometry import wrap_angle
 
+from objslam_common.geometry import wrap_angle
 from objslam_mapper.graph.layout import Layout, graph_log_normalizer
 from objslam_mapper.graph.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.model.outliers import (
@@ -47,6 +47,10 @@ from objslam_mapper.model.outliers import (
 from objslam_mapper.model.slice_model import ReducedPrediction, predict_reduced, whitened_slice_error
 
 
+def _empty() -> NDArray[np.float64]:
+    return np.zeros(0)
+
+
 @dataclass
 class Linearization:
     """Cost and normal equations at one state (``valid`` False: the model is undefined there)."""
@@ -54,15 +58,16 @@ class Linearization:
     cost: float
     valid: bool
     outliers: int = 0  # slices beyond their (unscaled) outlier cost
-    grad_pose: NDArray[np.float64] | None = None  # (3N,)
-    grad_object: NDArray[np.float64] | None = None  # (5K,)
-    pose_diag: NDArray[np.float64] | None = None  # (N, 3, 3)
-    pose_off: NDArray[np.float64] | None = None  # (N-1, 3, 3): block (i, i+1)
-    cross: NDArray[np.float64] | None = None  # (3, 5, A) pose-object block of each slice
-    object_diag: NDArray[np.float64] | None = None  # (K, 5, 5)
-    grad_calib: NDArray[np.float64] | None = None  # (C,) C = 3 with the calibration, else 0
-    pose_calib: NDArray[np.float64] | None = None  # (N, 3, C) pose-calibration blocks
-    calib_diag: NDArray[np.float64] | None = None  # (C, C)
+    # The blocks are empty where the model is undefined (``valid`` False).
+    grad_pose: NDArray[np.float64] = field(default_factory=_empty)  # (3N,)
+    grad_object: NDArray[np.float64] = field(default_factory=_empty)  # (5K,)
+    pose_diag: NDArray[np.float64] = field(default_factory=_empty)  # (N, 3, 3)
+    pose_off: NDArray[np.float64] = field(default_factory=_empty)  # (N-1, 3, 3): block (i, i+1)
+    cross: NDArray[np.float64] = field(default_factory=_empty)  # (3, 5, A) pose-object block of each slice
+    object_diag: NDArray[np.float64] = field(default_factory=_empty)  # (K, 5, 5)
+    grad_calib: NDArray[np.float64] = field(default_factory=_empty)  # (C,) C = 3 with the calibration, else 0
+    pose_calib: NDArray[np.float64] = field(default_factory=_empty)  # (N, 3, C) pose-calibration blocks
+    calib_diag: NDArray[np.float64] = field(default_factory=_empty)  # (C, C)
     _pose_object: NDArray[np.float64] | None = field(default=None, repr=False)
 
     def pose_object(self, layout: Layout) -> NDArray[np.float64]:

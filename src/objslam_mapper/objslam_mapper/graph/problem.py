@@ -45,10 +45,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.catalog import Catalog, ObjectClass
 from objslam_common.mount import CameraMount, CameraMounts
 from objslam_common.records import ImageSlices, OdometrySample
-
 from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps

@@ -55,8 +55,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.geometry import wrap_angle
 
+from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import SolverConfig
 from objslam_mapper.graph.covariance import (
     calibration_covariance,
@@ -144,7 +144,7 @@ def initial_state(
     for j, group in enumerate(layout.groups):
         owners = warm_start.object_of_measurement[group] if warm_start is not None else group[:0]
         owners = owners[owners >= 0]
-        if len(owners):
+        if warm_start is not None and len(owners):
             prev = warm_start.objects[int(np.argmax(np.bincount(owners)))]
             objects[j, :3], objects[j, 3:] = prev.location_m, prev.size_m
         else:
@@ -154,8 +154,8 @@ def initial_state(
     # object from its own measurements instead, and shrink any diameter that still does
     # not fit (the size prior regrows it while solving).
     nearest = _nearest_camera(problem, layout, poses, objects)
-    for j in np.flatnonzero(nearest <= 0.5 * objects[:, 3]):
-        objects[j] = initial_object(problem, layout.groups[j], poses)
+    for k in np.flatnonzero(nearest <= 0.5 * objects[:, 3]):
+        objects[k] = initial_object(problem, layout.groups[k], poses)
     nearest = _nearest_camera(problem, layout, poses, objects)
     objects[:, 3] = np.minimum(objects[:, 3], 1.8 * nearest)
     return poses, objects

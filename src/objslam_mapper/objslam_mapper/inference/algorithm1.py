@@ -183,7 +183,7 @@ def _mean_calibration(weighted: Sequence[tuple[SampleSummary, float]]) -> dict[s
     second = sum(w * (cov + np.outer(c, c)) for c, cov, w in rows) / total
     cov = second - np.outer(mean, mean)
     cov = 0.5 * (cov + cov.T)
-    out: dict[str, Any] = {name: float(v) for name, v in zip(CALIBRATION_NAMES, mean, strict=True)}
+    out: dict[str, Any] = {name: float(v) for name, v in zip(CALIBRATION_NAMES, np.asarray(mean), strict=True)}
     out.update(
         {
             f"{name}_stddev": float(math.sqrt(max(v, 0.0)))
@@ -196,7 +196,7 @@ def _mean_calibration(weighted: Sequence[tuple[SampleSummary, float]]) -> dict[s
 
 def build_from_samples(
     samples: Iterable[tuple[SampleSummary, int]],
-    stamps_ns: Sequence[int],
+    stamps_ns: Sequence[int] | NDArray[np.int64],
     *,
     spurious_location_stddev_m: float = 0.30,
     existence_threshold: float = 0.5,
@@ -237,7 +237,8 @@ def build_from_samples(
         if probability > existence_threshold or seen >= report_min_fraction:
             rows.append((identity, entry, probability))
     rows.sort(key=lambda r: (-r[2], min(r[0])))
-    objects, rejected = [], []
+    objects: list[MappedObject] = []
+    rejected: list[MappedObject] = []
     for number, (identity, entry, probability) in enumerate(rows):
         mean, cov = entry.moments()
         mapped = MappedObject(

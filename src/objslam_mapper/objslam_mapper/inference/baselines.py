@@ -37,9 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
 from objslam_common.catalog import Catalog
 from objslam_common.records import ImageSlices, OdometrySample
-
 from objslam_mapper.config import GraphConfig, SamplerConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.backends import solve_with_backend

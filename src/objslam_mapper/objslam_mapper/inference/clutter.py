@@ -54,11 +54,10 @@ overcounted.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from objslam_mapper.config import ClutterConfig
 from objslam_mapper.graph.backends import solve_with_backend
@@ -109,7 +108,7 @@ class ClutterModel:
             raise ValueError("the clutter model has no distractors (distractor_weight is 0)")
         return self._first_row + int(self.problem.measurement_label[measurement])
 
-    def distractor_log_evidence(self, measurement_indices: Sequence[int]) -> float:
+    def distractor_log_evidence(self, measurement_indices: ArrayLike) -> float:
         """Laplace evidence of the slices as one distractor, with the odometry alone."""
         if self._first_row is None:
             return -math.inf
@@ -117,10 +116,10 @@ class ClutterModel:
         row = self.distractor_row(int(members[0]))
         return solve_with_backend(self.problem, [members], priors=[row]).log_evidence
 
-    def component(self, measurement_indices: Sequence[int]) -> Component:
+    def component(self, measurement_indices: ArrayLike) -> Component:
         """The component that explains a tracklet (the likelier one with the odometry alone)."""
         w = self.config.distractor_weight
-        independent = self.config.log_likelihood(len(measurement_indices))
+        independent = self.config.log_likelihood(np.size(measurement_indices))
         if w == 0.0:
             return Component(INDEPENDENT, independent, independent)
         distractor = self.distractor_log_evidence(measurement_indices)

@@ -57,9 +57,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
-from objslam_common.geometry import wrap_angle
+from numpy.typing import ArrayLike, NDArray
 
+from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import DetectionConfig
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_reduced
@@ -85,9 +85,9 @@ class Sight:
     range_m: NDArray[np.float64]
     in_view: NDArray[np.bool_]
 
-    def columns(self, index: Sequence[int]) -> Sight:
-        index = np.asarray(index, dtype=np.int64)
-        return Sight(*(getattr(self, f)[:, index] for f in Sight.__dataclass_fields__))
+    def columns(self, index: ArrayLike) -> Sight:
+        taken = np.asarray(index, dtype=np.int64)
+        return Sight(*(getattr(self, f)[:, taken] for f in Sight.__dataclass_fields__))
 
     @staticmethod
     def join(parts: Sequence[Sight]) -> Sight:

@@ -92,7 +92,7 @@ def no_overlap_log_probability(
     problem: GraphProblem,
     map_T_base: NDArray[np.float64],
     objects: NDArray[np.float64],
-    groups: Sequence[NDArray[np.int64]],
+    groups: Sequence[NDArray[np.int64] | None],
     priors: Sequence[int],
     floor: float = DEFAULT_FLOOR,
     pairs: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
@@ -110,6 +110,9 @@ def no_overlap_log_probability(
         return 0.0
     covariances: dict[int, NDArray[np.float64]] = {}
     for k in np.unique(np.concatenate(pairs)):
-        info = object_information(problem, map_T_base, groups[k], objects[k], priors[k])
-        covariances[int(k)] = np.full((5, 5), np.inf) if info is None else np.linalg.inv(info)
+        group = groups[k]
+        if group is None:
+            raise ValueError(f"object {k} is in a pair but its measurements were not given")
+        info = object_information(problem, map_T_base, group, objects[k], priors[k])
+        covariances[int(k)] = np.full((5, 5), np.inf) if info is None else np.asarray(np.linalg.inv(info), dtype=float)
     return pairs_log_probability(objects, covariances, pairs, floor)

@@ -36,10 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from objslam_common.geometry import wrap_angle
-from objslam_common.mount import CameraMount
 from scipy.optimize import linear_sum_assignment
 
+from objslam_common.geometry import wrap_angle
+from objslam_common.mount import CameraMount
 from objslam_mapper.config import TrackletConfig
 from objslam_mapper.graph.problem import GraphProblem
 

@@ -26,10 +26,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
+
 from objslam_common.geometry import between, interpolate_pose, wrap_angle
 from objslam_common.records import OdometrySample
-
 from objslam_mapper.config import OdometryNoiseConfig
 from objslam_mapper.errors import MapperError
 
@@ -71,7 +71,7 @@ def _sorted_odometry(odometry: Sequence[OdometrySample]) -> tuple[NDArray[np.int
     return stamps[keep], poses[keep]
 
 
-def poses_at_stamps(odometry: Sequence[OdometrySample], stamps_ns: Sequence[int]) -> PosesAtStamps:
+def poses_at_stamps(odometry: Sequence[OdometrySample], stamps_ns: ArrayLike) -> PosesAtStamps:
     """Interpolate odometry at each stamp; stamps outside the odometry span are rejected."""
     odo_stamps, odo_poses = _sorted_odometry(odometry)
     steps = np.diff(odo_poses, axis=0)

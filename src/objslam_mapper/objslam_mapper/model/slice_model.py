@@ -49,12 +49,13 @@ The solver works on that reduced, component-major form; :func:`predict_slices` e
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
 from objslam_common.geometry import wrap_angle
-from objslam_common.mount import CameraMount
+from objslam_common.mount import CameraMount, CameraMounts
 
 BEARING, WIDTH, ELEVATION_BOTTOM, ELEVATION_TOP = range(4)
 COMPONENTS = ("bearing", "angular_width", "elevation_bottom", "elevation_top")
@@ -81,15 +82,19 @@ class SlicePrediction:
 
 @dataclass(frozen=True)
 class ReducedPrediction:
-    """Component-major prediction: ``values`` (4, M), ``jacobian`` (4, 6, M) over ``REDUCED_COLUMNS``."""
+    """Component-major prediction: ``values`` (4, M), ``jacobian`` (4, 6, M) over ``REDUCED_COLUMNS``
+    (empty unless asked for)."""
 
     values: NDArray[np.float64]
     valid: NDArray[np.bool_]
     range_m: NDArray[np.float64]
-    jacobian: NDArray[np.float64] | None = None
+    jacobian: NDArray[np.float64] = field(default_factory=lambda: np.zeros((4, 6, 0)))
+    has_jacobian: bool = False
 
 
-def camera_positions(map_T_base: ArrayLike, mount: CameraMount) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def camera_positions(
+    map_T_base: ArrayLike, mount: CameraMount | CameraMounts
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Map x, y of the camera for (M, 3) robot poses (vectorized ``CameraMount.camera_pose``)."""
     pose = np.atleast_2d(np.asarray(map_T_base, dtype=float))
     cos_t, sin_t = np.cos(pose[:, 2]), np.sin(pose[:, 2])
@@ -109,7 +114,7 @@ def predict_reduced(
     map_T_base: ArrayLike,
     location_m: ArrayLike,
     size_m: ArrayLike,
-    mount: CameraMount,
+    mount: CameraMount | CameraMounts,
     *,
     jacobians: bool = True,
 ) -> ReducedPrediction:
@@ -177,14 +182,14 @@ def predict_reduced(
     tx, ty = sin_t * ox + cos_t * oy, -cos_t * ox + sin_t * oy
     jac[:, 2] = jac[:, 0] * tx + jac[:, 1] * ty
     jac[BEARING, 2] -= 1.0
-    return ReducedPrediction(values=values, valid=valid, range_m=dist, jacobian=jac)
+    return ReducedPrediction(values=values, valid=valid, range_m=dist, jacobian=jac, has_jacobian=True)
 
 
 def predict_slices(
     map_T_base: ArrayLike,
     location_m: ArrayLike,
     size_m: ArrayLike,
-    mount: CameraMount,
+    mount: CameraMount | CameraMounts,
     *,
     jacobians: bool = True,
 ) -> SlicePrediction:
@@ -194,7 +199,7 @@ def predict_slices(
     """
     red = predict_reduced(map_T_base, location_m, size_m, mount, jacobians=jacobians)
     values = red.values.T
-    if red.jacobian is None:
+    if not red.has_jacobian:
         return SlicePrediction(values=values, valid=red.valid, range_m=red.range_m)
     jac = red.jacobian.transpose(2, 0, 1)  # (M, 4, 6)
     d_pose = np.concatenate([-jac[:, :, 0:2], jac[:, :, 2:3]], axis=2)

@@ -5,12 +5,12 @@ from __future__ import annotations
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
 from nav_msgs.msg import Path
-from objslam_common.catalog import Catalog
-from objslam_common.geometry import quaternion_from_yaw
-from objslam_common.ros.conversions import time_from_ns
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from objslam_common.catalog import Catalog
+from objslam_common.geometry import quaternion_from_yaw
+from objslam_common.ros.conversions import time_from_ns
 from objslam_mapper.map_file import BuiltMap, MappedObject
 from objslam_msgs.msg import MapObject, ObjectMap
 

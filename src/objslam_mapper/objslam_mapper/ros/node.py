@@ -23,11 +23,6 @@ from pathlib import Path
 
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
-from objslam_common.catalog import load_catalog
-from objslam_common.errors import MessageError
-from objslam_common.ros.conversions import image_slices, odometry_sample, time_from_ns
-from objslam_common.ros.params import declare_config
-from objslam_common.ros.spin import run_node
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -35,6 +30,11 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
+from objslam_common.catalog import load_catalog
+from objslam_common.errors import MessageError
+from objslam_common.ros.conversions import image_slices, odometry_sample, time_from_ns
+from objslam_common.ros.params import declare_config
+from objslam_common.ros.spin import run_node
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.map_file import BuiltMap, MapFileError, write_map

@@ -52,7 +52,6 @@ def _bag_frames(path: str, count: int) -> tuple[list[tuple[NDArray[np.uint8], st
 
 def run(args: argparse.Namespace) -> int:
     from objslam_common.config import load_config
-
     from objslam_detector import Detector, DetectorConfig
     from objslam_tools.bench import use_one_core
     from objslam_tools.errors import UserError

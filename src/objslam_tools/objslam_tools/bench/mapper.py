@@ -73,7 +73,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace, samples: int, burn_in: int) -> Any:
     from objslam_common.config import default_config_dir, load_config
-
     from objslam_mapper.config import MapperConfig
 
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
@@ -102,7 +101,6 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
     """
     from objslam_common.catalog import load_catalog
     from objslam_common.config import load_config
-
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
     from objslam_tools.bag import open_bag
@@ -133,7 +131,6 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
 def _build(odometry: tuple, images: tuple, config: Any) -> dict[str, Any]:
     """Time one map build (problem included, detector excluded)."""
     from objslam_common.catalog import load_catalog
-
     from objslam_mapper.graph.problem import build_problem
     from objslam_mapper.inference.infer import infer_map
 
@@ -205,6 +202,7 @@ def scaling_chain(args: argparse.Namespace) -> tuple[int, int]:
 
 def _scaling(args: argparse.Namespace, cache_dir: Path) -> dict[str, Any]:
     import numpy as np
+
     from objslam_common.config import default_config_dir
 
     rows = []

@@ -37,8 +37,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import cv2
-    from objslam_common.config import load_config
 
+    from objslam_common.config import load_config
     from objslam_detector import Detector, DetectorConfig
     from objslam_tools.commands.sim import _StderrProgress
     from objslam_tools.detector_eval import EvalOptions, evaluate_bag, format_report

@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from objslam_common.catalog import load_catalog
-
 from objslam_mapper.map_file import read_map
 from objslam_tools.errors import UserError
 from objslam_tools.figures import write_figures

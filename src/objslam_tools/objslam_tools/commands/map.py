@@ -44,9 +44,9 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     import cv2
+
     from objslam_common.catalog import load_catalog
     from objslam_common.config import default_config_dir, load_config
-
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
     from objslam_mapper.config import MapperConfig

@@ -23,10 +23,10 @@ import argparse
 import dataclasses
 
 import numpy as np
-from objslam_common.catalog import load_catalog
-from objslam_common.config import default_config_dir, load_config
 from scipy.stats import chi2
 
+from objslam_common.catalog import load_catalog
+from objslam_common.config import default_config_dir, load_config
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.factorize import factorize
 from objslam_mapper.graph.gauge import object_motion, trajectory_gauge

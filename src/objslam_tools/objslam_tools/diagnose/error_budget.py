@@ -28,10 +28,10 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+
 from objslam_common.catalog import load_catalog
 from objslam_common.config import default_config_dir, load_config
 from objslam_common.geometry import inverse, transform_points, wrap_angle
-
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.covariance import noise_groups, prior_scale
 from objslam_mapper.graph.error_covariance import owner_rows

@@ -18,10 +18,10 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+
 from objslam_common.catalog import load_catalog
 from objslam_common.config import default_config_dir, load_config
 from objslam_common.geometry import wrap_angle
-
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.model.slice_model import BEARING, COMPONENTS, ELEVATION_TOP, censor, predict_reduced
 from objslam_tools.oracle_map import oracle_problem

@@ -11,9 +11,10 @@ from typing import Any
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from rosbags.typesys import Stores, get_typestore
+
 from objslam_common.cameras.unified import UnifiedCamera
 from objslam_common.geometry import quaternion_from_yaw
-from rosbags.typesys import Stores, get_typestore
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 IMAGE = "sensor_msgs/msg/Image"

@@ -15,9 +15,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from objslam_common.geometry import rotation, wrap_angle
 from scipy.interpolate import CubicSpline
 
+from objslam_common.geometry import rotation, wrap_angle
 from objslam_tools.errors import ToolsError
 
 

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_common.mount import CameraMount
-
 from objslam_tools.sim.scene import POST_RGB, SIGN_POST_RADIUS_M, TABLE_RGB, Scene
 
 # Element indices of the room; things in the scene follow.

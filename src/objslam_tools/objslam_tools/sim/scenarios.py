@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.mount import CameraMount
-
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, Room, Table
 from objslam_tools.sim.motion import OdometryNoise, SmoothPath, SpeedProfile, wheel_odometry

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
 from objslam_common.catalog import Catalog
 from objslam_common.mount import CameraMount
-
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, Room, Table
 
 RGB = tuple[int, int, int]
