@@ -219,3 +219,42 @@ def test_the_checks_see_what_they_forbid(tmp_path):
 @pytest.mark.parametrize("package", ["objslam_common", "objslam_mapper", "objslam_detector", "objslam_tools"])
 def test_every_package_is_seen(package):
     assert any(_in(imp.importer, package) for imp in all_imports(SRC))
+
+
+# -- named options instead of long positional lists ------------------------------------------
+
+MAX_POSITIONAL = 6
+FOREIGN_CALLS = ("cv2.", "np.", "numpy.", "logger.", "logging.", "scipy.", "gtsam.")
+
+
+def long_positional_lists(src: Path) -> list[str]:
+    """Functions of ours taking more than ``MAX_POSITIONAL`` positional parameters (self and
+    cls not counted), and calls passing more than that many positionally to anything but a
+    third-party library."""
+    found = []
+    for path in sorted(src.rglob("*.py")):
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                names = [a.arg for a in node.args.posonlyargs + node.args.args]
+                names = names[1:] if names and names[0] in ("self", "cls") else names
+                if len(names) > MAX_POSITIONAL:
+                    found.append(f"{path}:{node.lineno}: def {node.name} takes {len(names)} positional parameters")
+            elif isinstance(node, ast.Call) and len(node.args) > MAX_POSITIONAL:
+                callee = ast.unparse(node.func)
+                if not callee.startswith(FOREIGN_CALLS):
+                    found.append(f"{path}:{node.lineno}: {callee} called with {len(node.args)} positional arguments")
+    return found
+
+
+def test_no_long_positional_argument_lists():
+    assert long_positional_lists(SRC) == []
+
+
+def test_the_positional_check_sees_long_lists(tmp_path):
+    (tmp_path / "m.py").write_text(
+        "def f(a, b, c, d, e, g, h):\n    pass\n\n\nf(1, 2, 3, 4, 5, 6, 7)\ncv2.putText(1, 2, 3, 4, 5, 6, 7, 8)\n"
+        "def ok(self, a, b, c, d, e, g, *, h=0):\n    pass\n"
+    )
+    found = long_positional_lists(tmp_path)
+    assert len(found) == 2 and "def f takes 7" in found[0] and "f called with 7" in found[1]

@@ -118,7 +118,7 @@ def test_a_short_thing_does_not_hide_a_tall_one_that_stands_out_above_it():
 
 def _sightings_with_tables(things, on_table, poses=ROBOT):
     return sightings(
-        _Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), [], CONFIG, 0.4, on_table
+        _Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), [], CONFIG, 0.4, on_table=on_table
     )
 
 
@@ -135,7 +135,7 @@ def test_a_table_hides_what_is_behind_it_but_not_the_object_on_it():
     assert tables.top[0, 0] == pytest.approx(np.arctan2(0.72 - MOUNT.height_m, 2.0 - CONFIG.table_diameter_m / 2))
     no_tables = DetectionConfig(table_diameter_m=0.0)
     seen = sightings(
-        _Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [], no_tables, 0.4, [True, False]
+        _Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [], no_tables, 0.4, on_table=[True, False]
     )
     assert not seen.hidden.any()
 

@@ -209,13 +209,13 @@ def parameters(config: Any, prefix: str = "", expert: bool = False, section: str
             shown = list(value) if isinstance(value, tuple) else value
             found.append(
                 Parameter(
-                    name,
-                    shown,
-                    meta.get("description", ""),
-                    is_expert,
-                    meta.get("minimum"),
-                    meta.get("maximum"),
-                    section,
+                    name=name,
+                    value=shown,
+                    description=meta.get("description", ""),
+                    expert=is_expert,
+                    minimum=meta.get("minimum"),
+                    maximum=meta.get("maximum"),
+                    section=section,
                 )
             )
     return found

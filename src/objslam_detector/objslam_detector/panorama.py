@@ -55,7 +55,17 @@ class Panorama:
         u = np.where(inside, u, -10.0).astype(np.float32)
         v = np.where(inside, v, -10.0).astype(np.float32)
         map1, map2 = cv2.convertMaps(u, v, cv2.CV_16SC2)
-        return cls(camera, az_step, el_step, top, rows, cols, map1, map2, inside)
+        return cls(
+            camera=camera,
+            azimuth_step_rad=az_step,
+            elevation_step_rad=el_step,
+            top_elevation_rad=top,
+            rows=rows,
+            cols=cols,
+            map1=map1,
+            map2=map2,
+            inside=inside,
+        )
 
     def unwarp(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The panorama of an image of this calibration (any channel count)."""

@@ -259,6 +259,7 @@ def evaluate_bag(
     bag_path: str | Path,
     detector: Detector,
     options: EvalOptions | None = None,
+    *,
     max_frames: int | None = None,
     every: int = 1,
     progress: Callable[[int, int], None] | None = None,
@@ -306,7 +307,15 @@ def evaluate_bag(
         distractors = [(d, *distractor_sector(d, gt, pose)) for d in gt.distractors]
         trouble = score_frame(slices, objects, distractors, evaluation, options)
         if trouble and overlay_dir is not None and overlays < max_overlays:
-            save_overlay(overlay_dir / f"frame_{index:05d}.png", pixels, encoding, slices, objects, camera, detector)
+            save_overlay(
+                overlay_dir / f"frame_{index:05d}.png",
+                pixels,
+                encoding,
+                slices,
+                objects,
+                camera=camera,
+                detector=detector,
+            )
             overlays += 1
     if evaluation.frames == 0:
         raise UserError(f"bag {bag_path}: no image could be scored ({', '.join(evaluation.skipped) or 'no images'})")
@@ -333,6 +342,7 @@ def save_overlay(
     encoding: str,
     slices: Sequence[SliceMeasurement],
     objects: Sequence[VisibleObject],
+    *,
     camera: UnifiedCamera,
     detector: Detector,
 ) -> None:

@@ -293,6 +293,7 @@ def write_figures(
     built_map: BuiltMap,
     out_dir: str | os.PathLike[str],
     bag: str | os.PathLike[str] | Bag | None = None,
+    *,
     frames: Sequence[int] | None = None,
     catalog: Catalog | None = None,
     mount: CameraMount | None = None,

@@ -182,6 +182,7 @@ def truth_residual_chi2(
     location_m: ArrayLike,
     size_m: ArrayLike,
     mount: CameraMount,
+    *,
     censored_top: ArrayLike | None = None,
 ) -> NDArray[np.float64]:
     """(M,) squared normalized residual of slices against their objects' predictions at the truth.

@@ -33,6 +33,7 @@ def _range_from_edge(
     radius_var: float,
     elevation: NDArray,
     elevation_var: NDArray,
+    *,
     far: bool,
 ) -> tuple[NDArray, NDArray]:
     """Range and variance from one edge; NaN/inf where the edge is not informative."""
@@ -71,7 +72,7 @@ def initial_object(problem: GraphProblem, indices: ArrayLike, map_T_base: NDArra
         (bottom, sd[2] ** 2, ELEVATION_BOTTOM, bottom > 0.0),
         (top, sd[2] ** 2 + sd[4] ** 2, ELEVATION_TOP, top < 0.0),
     ):
-        dist, dist_var = _range_from_edge(face, face_var, radius, radius_var, z[:, comp], var[:, comp], far)
+        dist, dist_var = _range_from_edge(face, face_var, radius, radius_var, z[:, comp], var[:, comp], far=far)
         ranges.append(dist)
         range_vars.append(dist_var)
     weights = 1.0 / np.stack(range_vars)

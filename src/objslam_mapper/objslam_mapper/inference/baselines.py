@@ -194,6 +194,7 @@ def build_baseline_map(
     images: Sequence[ImageSlices],
     catalog: Catalog,
     association: str,
+    *,
     graph: GraphConfig | None = None,
     sampler: SamplerConfig | None = None,
     progress: PhaseProgress | None = None,

@@ -223,6 +223,7 @@ class MetropolisHastings:
         samples: int,
         burn_in: int,
         rng: np.random.Generator | int,
+        *,
         progress: Progress | None = None,
         keep_trace: bool = True,
         on_move: Callable[[Association], None] | None = None,

@@ -239,6 +239,7 @@ def sightings(
     groups: Sequence[NDArray[np.int64]],
     config: DetectionConfig,
     view_top_rad: float,
+    *,
     on_table: NDArray[np.bool_] | None = None,
 ) -> Sightings:
     """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices);
@@ -262,11 +263,12 @@ def detection_log_likelihood(
     groups: Sequence[NDArray[np.int64]],
     config: DetectionConfig,
     view_top_rad: float,
+    *,
     on_table: NDArray[np.bool_] | None = None,
 ) -> float:
     """``sum of n_miss log(1 - P_d)`` over ``things`` (K, 5) and their ``groups``
     (measurement indices; module docstring), ``on_table`` as for :func:`sightings`."""
     if not config.enabled or not len(groups):
         return 0.0
-    seen = sightings(problem, map_T_base, things, groups, config, view_top_rad, on_table)
+    seen = sightings(problem, map_T_base, things, groups, config, view_top_rad, on_table=on_table)
     return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), config)

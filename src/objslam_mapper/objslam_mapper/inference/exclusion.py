@@ -95,6 +95,7 @@ def no_overlap_log_probability(
     groups: Sequence[NDArray[np.int64] | None],
     priors: Sequence[int],
     floor: float = DEFAULT_FLOOR,
+    *,
     pairs: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
 ) -> float:
     """``log P(no two objects overlap | J, Z)`` (module docstring), each pair's term at least

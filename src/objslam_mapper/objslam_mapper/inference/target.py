@@ -253,7 +253,9 @@ class AssociationTarget:
         groups = self.graph_groups(state)
         members = [self.measurements(g) for g in groups]
         on_table = self.on_table(groups, members)
-        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad, on_table)
+        seen = sightings(
+            self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad, on_table=on_table
+        )
         self._sights[state] = (map_T_base, seen)
         if len(self._sights) > SIGHTINGS_CACHE_SIZE:
             self._sights.popitem(last=False)

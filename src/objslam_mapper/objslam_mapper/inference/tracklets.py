@@ -162,6 +162,7 @@ def chain_tracklets(
     frame_poses: ArrayLike,
     shapes: Mapping[str, ClassShape],
     mount: CameraMount,
+    *,
     config: TrackletConfig | None = None,
     measurement_stddev: ArrayLike | None = None,
 ) -> TrackletResult:
@@ -292,6 +293,6 @@ def tracklets_of_problem(problem: GraphProblem, config: TrackletConfig | None = 
         problem.odometry_poses,
         class_shapes(problem),
         problem.mount,
-        config,
-        problem.measurement_stddev,
+        config=config,
+        measurement_stddev=problem.measurement_stddev,
     )

@@ -89,6 +89,7 @@ def odometry(
     pose: NDArray[np.float64],
     speed_mps: float,
     yaw_rate_rps: float,
+    *,
     pose_variance: tuple[float, float, float] = (0.0, 0.0, 0.0),
     twist_variance: tuple[float, float] = (0.0, 0.0),
 ) -> Any:

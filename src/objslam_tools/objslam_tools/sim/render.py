@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -102,14 +103,14 @@ def _compile(scene: Scene) -> _CompiledScene:
         w_axis, h_axis, normal = d.axes()
         rectangles.append(
             _Rectangle(
-                e,
-                np.asarray(d.center_m, float),
-                w_axis,
-                h_axis,
-                normal,
-                d.size_m[0] / 2,
-                d.size_m[1] / 2,
-                d.corners_m(),
+                element=e,
+                center=np.asarray(d.center_m, float),
+                width_axis=w_axis,
+                height_axis=h_axis,
+                normal=normal,
+                half_width=d.size_m[0] / 2,
+                half_height=d.size_m[1] / 2,
+                corners=d.corners_m(),
             )
         )
         if d.kind == "sign":
@@ -117,6 +118,14 @@ def _compile(scene: Scene) -> _CompiledScene:
             bottom = d.center_m[2] - d.size_m[1] / 2.0
             cylinders.append(_Cylinder(e, d.center_m[0], d.center_m[1], SIGN_POST_RADIUS_M, 0.0, bottom))
     return _CompiledScene(tuple(elements), np.asarray(albedo, dtype=np.float32), tuple(cylinders), tuple(rectangles))
+
+
+class _Hits(NamedTuple):
+    """Per ray, the nearest surface found so far: its distance, element and normal (updated in place)."""
+
+    distance: NDArray[np.float64]
+    element: NDArray[np.int32]
+    normal: NDArray[np.float64]
 
 
 class Renderer:
@@ -183,13 +192,14 @@ class Renderer:
         dz = self._sin_el
         rays = (dx, dy, dz)
 
-        t_best, element, normal = self._room(scene, origin, rays)
+        hits = self._room(scene, origin, rays)
         for cyl in compiled.cylinders:
-            self._cylinder(cyl, origin, yaw, rays, t_best, element, normal)
+            self._cylinder(cyl, origin, yaw, rays, hits)
         for rect in compiled.rectangles:
-            self._rectangle(rect, origin, yaw, rays, t_best, element, normal)
+            self._rectangle(rect, origin, yaw, rays, hits)
 
-        rgb = self._shade(scene, compiled, origin, rays, t_best, element, normal, rng)
+        rgb = self._shade(scene, compiled, origin, rays, hits, rng)
+        element = hits.element
         h, w = self.camera.height_px, self.camera.width_px
         image = np.zeros((h * w, 3), dtype=np.uint8)
         image[self._pixel] = rgb
@@ -197,7 +207,7 @@ class Renderer:
         element_map[self._pixel] = element
         return Rendering(image.reshape(h, w, 3), element_map.reshape(h, w), compiled.elements)
 
-    def _room(self, scene: Scene, origin: NDArray, rays: tuple[NDArray, NDArray, NDArray]):
+    def _room(self, scene: Scene, origin: NDArray, rays: tuple[NDArray, NDArray, NDArray]) -> _Hits:
         """Exit distance of every ray from the room box, and which face it leaves through."""
         r = scene.room
         dx, dy, dz = rays
@@ -216,14 +226,14 @@ class Renderer:
         closer = tz < t
         element[closer] = np.where(dz[closer] > 0, CEILING, FLOOR)
         t = np.where(closer, tz, t)
-        normal = _ROOM_NORMALS[element]
-        return t, element, normal
+        return _Hits(t, element, _ROOM_NORMALS[element])
 
     def _candidate_slices(self, bearing_rad: float, half_width_rad: float, yaw: float) -> list[slice]:
         lo = bearing_rad - half_width_rad - _AZIMUTH_MARGIN_RAD - yaw
         return self._slices(lo, 2.0 * (half_width_rad + _AZIMUTH_MARGIN_RAD))
 
-    def _cylinder(self, cyl: _Cylinder, origin, yaw, rays, t_best, element, normal) -> None:
+    def _cylinder(self, cyl: _Cylinder, origin, yaw, rays, hits: _Hits) -> None:
+        t_best, element, normal = hits
         px, py = origin[0] - cyl.x, origin[1] - cyl.y
         dist = np.hypot(px, py)
         if dist <= cyl.radius:
@@ -264,7 +274,8 @@ class Renderer:
             n[capped] = (0.0, 0.0, 1.0 if oz > cyl.z_top else -1.0)
             normal[idx] = n
 
-    def _rectangle(self, rect: _Rectangle, origin, yaw, rays, t_best, element, normal) -> None:
+    def _rectangle(self, rect: _Rectangle, origin, yaw, rays, hits: _Hits) -> None:
+        t_best, element, normal = hits
         rel = rect.corners[:, :2] - origin[:2]
         bearings = np.arctan2(rel[:, 1], rel[:, 0])
         offsets = wrap_angle(bearings - bearings[0])
@@ -304,7 +315,8 @@ class Renderer:
             element[idx] = rect.element
             normal[idx] = face
 
-    def _shade(self, scene: Scene, compiled: _CompiledScene, origin, rays, t_best, element, normal, rng):
+    def _shade(self, scene: Scene, compiled: _CompiledScene, origin, rays, hits: _Hits, rng):
+        t_best, element, normal = hits
         app = scene.appearance
         albedo = compiled.albedo[element]
         floor = np.flatnonzero(element == FLOOR)

@@ -373,6 +373,7 @@ def build_scenario(
     name: str,
     seed: int = 0,
     frames: int | None = None,
+    *,
     catalog: Catalog | None = None,
     camera: UnifiedCamera = DEFAULT_CAMERA,
     mount: CameraMount | None = None,

@@ -138,8 +138,8 @@ def _write(
                 scenario.odom_poses[j],
                 odom_speed[j],
                 odom_rate[j],
-                (xy_var[j], xy_var[j], yaw_var[j]),
-                twist_var,
+                pose_variance=(xy_var[j], xy_var[j], yaw_var[j]),
+                twist_variance=twist_var,
             )
             writer.write(odom_conn, stamp, messages.serialize(odom))
             truth = messages.odometry(stamp, GROUND_TRUTH_FRAME, scenario.true_poses[j], true_speed[j], true_rate[j])
