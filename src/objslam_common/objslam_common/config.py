@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import textwrap
 import typing
 from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
@@ -224,3 +225,43 @@ def parameters(config: Any, prefix: str = "", expert: bool = False, section: str
 def to_mapping(config: Any) -> dict[str, Any]:
     """Nested plain mapping of a config (for YAML output)."""
     return unflatten({k: v for k, (v, _d) in flatten(config).items()})
+
+
+EXPERT_MARK = "[expert]"
+
+
+def parameter_file(config: Any, node_name: str, title: str, width: int = 100) -> str:
+    """A ROS 2 parameter file of ``config`` (its values, each under its description as a
+    comment, expert settings and sections marked ``[expert]``), which loads back to ``config``.
+
+    Lists that are empty are left as comments: a ROS 2 parameter file cannot hold one.
+    """
+    lines = [f"# {line}" for line in textwrap.wrap(title, width - 2)]
+    lines += [
+        "# Generated from the settings' descriptions in the code by `objslam params`; every key is",
+        f"# optional. {EXPERT_MARK} marks what only someone who knows the method should change.",
+        f"{node_name}:",
+        "  ros__parameters:",
+    ]
+    lines += _parameter_lines(config, "    ", width)
+    return "\n".join(lines) + "\n"
+
+
+def _parameter_lines(config: Any, indent: str, width: int) -> list[str]:
+    lines: list[str] = []
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        description = str(f.metadata.get("description", ""))
+        if f.metadata.get("expert", False):
+            description = f"{EXPERT_MARK} {description}"
+        lines += [f"{indent}# {line}" for line in textwrap.wrap(description, width - len(indent) - 2)]
+        if dataclasses.is_dataclass(value):
+            lines.append(f"{indent}{f.name}:")
+            lines += _parameter_lines(value, indent + "  ", width)
+        elif isinstance(value, (list, tuple)) and not value:
+            lines.append(f"{indent}# {f.name}: []  (empty: a ROS 2 parameter file cannot hold an empty list)")
+        else:
+            shown = list(value) if isinstance(value, tuple) else value
+            text = yaml.safe_dump({f.name: shown}, default_flow_style=True, width=10_000).strip()[1:-1]
+            lines.append(f"{indent}{text}")
+    return lines

@@ -33,20 +33,35 @@ class ColorConfig:
     """
 
     hue_halfwidth_max_deg: float = setting(
-        20.0, "largest hue half-width of a class gate, deg", minimum=1.0, maximum=90.0
+        20.0,
+        "largest hue half-width of a class gate, deg",
+        minimum=1.0,
+        maximum=90.0,
+        expert=True,
     )
     hue_neighbor_fraction: float = setting(
         0.45,
         "a gate reaches at most this fraction of the way to the nearest other class hue (< 0.5: gates never overlap)",
         minimum=0.05,
         maximum=0.5,
+        expert=True,
     )
     min_saturation_fraction: float = setting(
-        0.45, "saturation floor as a fraction of the class colour's saturation", minimum=0.0, maximum=1.0
+        0.45,
+        "saturation floor as a fraction of the class colour's saturation",
+        minimum=0.0,
+        maximum=1.0,
+        expert=True,
     )
-    min_saturation: float = setting(0.2, "absolute saturation floor (0..1), rejects greys", minimum=0.0, maximum=1.0)
+    min_saturation: float = setting(
+        0.2, "absolute saturation floor (0..1), rejects greys", minimum=0.0, maximum=1.0, expert=True
+    )
     min_value: float = setting(
-        0.1, "brightness floor (0..1): hue is noise in very dark pixels", minimum=0.0, maximum=1.0
+        0.1,
+        "brightness floor (0..1): hue is noise in very dark pixels",
+        minimum=0.0,
+        maximum=1.0,
+        expert=True,
     )
     class_overrides: tuple[str, ...] = setting(
         (),
@@ -95,6 +110,6 @@ class DetectorConfig:
         "subscribe to images with reliable QoS (no frame lost from a played bag) instead of sensor-data best effort",
     )
     # Frozen nested defaults are immutable, so sharing one instance is safe.
-    panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping")
+    panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping", expert=True)
     color: ColorConfig = setting(ColorConfig(), "colour gates")
-    blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates")
+    blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates", expert=True)

@@ -71,12 +71,18 @@ class OdometryNoiseConfig:
     xy_stddev_per_sqrt_rad: float = setting(0.02, "translation stddev (m) accumulated over 1 rad of turn", minimum=0.0)
     theta_stddev_per_sqrt_m: float = setting(0.03, "heading stddev (rad) accumulated over 1 m of travel", minimum=0.0)
     theta_stddev_per_sqrt_rad: float = setting(0.05, "heading stddev (rad) accumulated over 1 rad of turn", minimum=0.0)
-    min_xy_stddev_m: float = setting(0.002, "smallest translation stddev of one increment (m)", minimum=1e-9)
-    min_theta_stddev_rad: float = setting(0.002, "smallest heading stddev of one increment (rad)", minimum=1e-9)
-    first_pose_stddev_m: float = setting(
-        0.001, "prior stddev of the first pose's position (fixes the map frame to odom)", minimum=1e-9
+    min_xy_stddev_m: float = setting(
+        0.002, "smallest translation stddev of one increment (m)", minimum=1e-9, expert=True
     )
-    first_pose_stddev_rad: float = setting(0.001, "prior stddev of the first pose's heading (rad)", minimum=1e-9)
+    min_theta_stddev_rad: float = setting(
+        0.002, "smallest heading stddev of one increment (rad)", minimum=1e-9, expert=True
+    )
+    first_pose_stddev_m: float = setting(
+        0.001, "prior stddev of the first pose's position (fixes the map frame to odom)", minimum=1e-9, expert=True
+    )
+    first_pose_stddev_rad: float = setting(
+        0.001, "prior stddev of the first pose's heading (rad)", minimum=1e-9, expert=True
+    )
     calibration: OdometryCalibrationConfig = setting(
         OdometryCalibrationConfig(), "systematic odometry error (scale and bias) estimated with the map"
     )
@@ -103,17 +109,20 @@ class SliceNoiseConfig:
         "lower edge elevation stddev (rad) for classes standing above the camera on a support, "
         "whose top hides the object's lowest part (the measured edge is then the support's rim)",
         minimum=1e-9,
+        expert=True,
     )
     censor_view_top: bool = setting(
         True,
         "a slice of low confidence whose upper edge lies at the top of the camera's view was cut by it: "
         "its upper edge is a lower bound on the object's, which costs only where the model's lies below it",
+        expert=True,
     )
     view_top_tolerance_rad: float = setting(
         0.007,
         "an upper edge this close to the highest one seen at its bearing is at the top of the view "
         "(about 3 px at the bundled image's edge)",
         minimum=0.0,
+        expert=True,
     )
     low_confidence: float = setting(
         0.5,
@@ -121,9 +130,13 @@ class SliceNoiseConfig:
         "blob touching another class or the edge of the view)",
         minimum=0.0,
         maximum=1.0,
+        expert=True,
     )
     low_confidence_stddev_scale: float = setting(
-        4.0, "the noise stddevs of such slices are multiplied by this", minimum=1.0
+        4.0,
+        "the noise stddevs of such slices are multiplied by this",
+        minimum=1.0,
+        expert=True,
     )
     outlier_probability: float = setting(
         0.01,
@@ -132,6 +145,7 @@ class SliceNoiseConfig:
         "of Gaussian (0: every slice Gaussian)",
         minimum=0.0,
         maximum=0.5,
+        expert=True,
     )
     outlier_volume_rad4: float = setting(
         22.746,
@@ -139,6 +153,7 @@ class SliceNoiseConfig:
         "widths up to 1 rad, ordered edge elevations from -90 deg to the bundled camera's 64 deg: "
         "2 pi * 1 * (pi/2 + 1.12)^2 / 2)",
         minimum=1e-12,
+        expert=True,
     )
 
 
@@ -224,30 +239,39 @@ class ErrorCovarianceConfig:
 class SolverConfig:
     """Gauss-Newton / Levenberg-Marquardt loop of the known-association solve."""
 
-    max_iterations: int = setting(50, "most linearizations per solve", minimum=1)
+    max_iterations: int = setting(50, "most linearizations per solve", minimum=1, expert=True)
     absolute_tolerance: float = setting(
-        1e-4, "converged when the cost (half chi-square) drops by less than this", minimum=0.0
+        1e-4,
+        "converged when the cost (half chi-square) drops by less than this",
+        minimum=0.0,
+        expert=True,
     )
-    relative_tolerance: float = setting(0.0, "... plus this fraction of the cost", minimum=0.0)
+    relative_tolerance: float = setting(0.0, "... plus this fraction of the cost", minimum=0.0, expert=True)
     initial_lambda: float = setting(
-        1e-4, "Levenberg-Marquardt damping (relative to the diagonal) after a failed Gauss-Newton step", minimum=1e-12
+        1e-4,
+        "Levenberg-Marquardt damping (relative to the diagonal) after a failed Gauss-Newton step",
+        minimum=1e-12,
+        expert=True,
     )
-    max_lambda: float = setting(1e8, "give up when the damping grows beyond this", minimum=1.0)
+    max_lambda: float = setting(1e8, "give up when the damping grows beyond this", minimum=1.0, expert=True)
     dense_object_limit: int = setting(
         200,
         "up to this many objects (distractors included) the linear systems are solved by the objects' dense "
         "Schur complement, beyond it by a sparse LU (measured here: the Schur complement is 5x faster at 60 "
         "objects on 900 poses)",
         minimum=0,
+        expert=True,
     )
     backend: str = setting(
         "fast",
         "which solver runs each known-association solve: 'fast' (objslam_mapper.graph.solver, numpy) or 'gtsam' "
         "(objslam_mapper.graph.gtsam_backend: the same model as a GTSAM factor graph; same answers, slower)",
     )
-    keyframes: KeyframeConfig = setting(KeyframeConfig(), "which images get a graph pose of their own")
+    keyframes: KeyframeConfig = setting(KeyframeConfig(), "which images get a graph pose of their own", expert=True)
     error_covariance: ErrorCovarianceConfig = setting(
-        ErrorCovarianceConfig(), "which covariances a map reports: the estimate's error, or the posterior"
+        ErrorCovarianceConfig(),
+        "which covariances a map reports: the estimate's error, or the posterior",
+        expert=True,
     )
 
     def __post_init__(self) -> None:
@@ -449,9 +473,9 @@ class SamplerConfig:
     samples: int = setting(6000, "MH steps in all, burn-in included (paper: 6000)", minimum=1)
     burn_in: int = setting(2500, "first steps left out of the map (paper: 2500)", minimum=0)
     seed: int = setting(1, "random seed of the chain (same seed, same inputs: same map)", minimum=0)
-    moves: MoveConfig = setting(MoveConfig(), "proposal moves")
-    tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets")
-    clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model")
+    moves: MoveConfig = setting(MoveConfig(), "proposal moves", expert=True)
+    tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets", expert=True)
+    clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model", expert=True)
     spurious_location_stddev_m: float = setting(
         0.30, "an object whose horizontal location stddev (largest axis) exceeds this is spurious (m)", minimum=0.0
     )
@@ -467,27 +491,41 @@ class SamplerConfig:
         "(1: the paper's exact identity)",
         minimum=0.501,
         maximum=1.0,
+        expert=True,
     )
     initial_merge_distance_m: float = setting(
-        0.6, "start state: a tracklet joins the nearest same-class object within this distance (m)", minimum=0.0
+        0.6,
+        "start state: a tracklet joins the nearest same-class object within this distance (m)",
+        minimum=0.0,
+        expert=True,
     )
     exclusion: bool = setting(
-        True, "objects are solid: an association pays the posterior probability that two of its objects overlap"
+        True,
+        "objects are solid: an association pays the posterior probability that two of its objects overlap",
+        expert=True,
     )
     exclusion_floor_nats: float = setting(
         -60.0,
         "... each pair at most this much: with exp(floor) the prior does not hold (one object on another)",
         maximum=0.0,
+        expert=True,
     )
-    detection: DetectionConfig = setting(DetectionConfig(), "detection probability and visibility of objects")
+    detection: DetectionConfig = setting(
+        DetectionConfig(), "detection probability and visibility of objects", expert=True
+    )
     initial_clutter: bool = setting(
         True,
         "start state: a tracklet the target prefers as clutter over a lone object starts in clutter, then start "
         "objects the target prefers as clutter go there, each clutter tracklet is tried once in its nearest object, "
         "and the objects are tried as clutter again (false: the plain nearest-neighbour start)",
+        expert=True,
     )
-    proposal_max_iterations: int = setting(15, "most solver linearizations per proposed association", minimum=1)
-    solution_cache_size: int = setting(256, "graph solutions kept for warm starts and map building", minimum=1)
+    proposal_max_iterations: int = setting(
+        15, "most solver linearizations per proposed association", minimum=1, expert=True
+    )
+    solution_cache_size: int = setting(
+        256, "graph solutions kept for warm starts and map building", minimum=1, expert=True
+    )
     screen: ScreenConfig = setting(
         ScreenConfig(), "delayed acceptance: a cheap first look at each proposal", expert=True
     )
