@@ -1,4 +1,4 @@
-"""The unified camera model against the data contract's formula (DESIGN.md, "Camera model")."""
+"""The unified camera model against the data contract's formula (docs/design.md, "Cameras and the mount")."""
 
 from __future__ import annotations
 

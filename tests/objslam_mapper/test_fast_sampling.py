@@ -1,4 +1,4 @@
-"""Fast sampling (issue 7): empty graphs, the conditional object evidence and delayed acceptance."""
+"""Fast sampling: empty graphs, the conditional object evidence and delayed acceptance."""
 
 from __future__ import annotations
 

@@ -71,7 +71,7 @@ def test_build_with_nothing_buffered_says_what_is_missing(processes, mapper):
 
 
 def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path):
-    # As a user runs them (README walk-through): parameter files, and the bag's /clock as time.
+    # As a user runs them (the README's walk-through): parameter files, and the bag's /clock as time.
     mapper = processes.start(
         objslam_cmd(
             "mapper", "--ros-args", "--params-file", str(CONFIG_DIR / "mapper.yaml"),

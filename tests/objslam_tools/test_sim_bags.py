@@ -1,4 +1,4 @@
-"""The bundled simulated bags keep the data contract (DESIGN.md, "Data contract"), read back with rosbags."""
+"""The bundled simulated bags keep the data contract (docs/design.md, "Data contract"), read back with rosbags."""
 
 from __future__ import annotations
 

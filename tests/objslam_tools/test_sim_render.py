@@ -156,7 +156,7 @@ def test_nearest_hit_wins_occlusion_and_scene_layout() -> None:
     u, v, _ = project(pose, np.array([3.9, 0.0, 0.2]))
     assert_colour(image, (u, v), CATALOG["red"].color_rgb, "occluded blue object")
     assert rendering.mask("object", 1).sum() == 0
-    # Forward is +u, left is up (-v) in the image (DESIGN.md camera model).
+    # Forward is +u, left is up (-v) in the image (docs/design.md camera model).
     u, v, _ = project(pose, np.array([1.85, 0.0, 0.3]))
     assert u > DEFAULT_CAMERA.cx + 100 and abs(v - DEFAULT_CAMERA.cy) < 1
     assert_colour(image, (u, v), CATALOG["red"].color_rgb, "red object")

@@ -398,7 +398,7 @@ class DetectionConfig:
     )
     table_diameter_m: float = setting(
         0.45,
-        "objects of a class whose base is above the floor stand on a table this wide (m; DESIGN.md), as "
+        "objects of a class whose base is above the floor stand on a table this wide (m; docs/design.md), as "
         "tall as their base, which hides what is behind it (0: no tables)",
         minimum=0.0,
     )

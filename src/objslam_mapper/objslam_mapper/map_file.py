@@ -1,4 +1,4 @@
-"""The built map as plain data, and its YAML file (DESIGN.md, "Outputs a person looks at").
+"""The built map as plain data, and its YAML file (docs/design.md, "Outputs").
 
 Frame: the odom frame of ``/odom``. Positions are ``[x, y, z_base]`` (z of the object's
 base), sizes ``[diameter, height]``, all in metres; trajectory stamps are float seconds

@@ -1,4 +1,4 @@
-r"""The known-association model as a GTSAM factor graph, solved by GTSAM (DESIGN.md, "The model").
+r"""The known-association model as a GTSAM factor graph, solved by GTSAM (docs/method.md, "The model").
 
 Same model, same answers as :func:`objslam_mapper.graph.solver.solve` (the fast numpy backend):
 the same variables, residuals, whitening, initialization, Laplace evidence and object

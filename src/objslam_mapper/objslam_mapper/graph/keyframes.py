@@ -36,7 +36,7 @@ rate of the bundled bags (about 8 cm between images) they would only join the fe
 taken while the robot stands, for a gain of a percent or two; there one pose per image is
 kept, as the paper has it. (Even that small change moved the chain on the ``clutter`` bag
 to a state its target prefers by 156 nats, with or without keyframes, that has a floor
-patch as an object: a fault of the missed-detection term, see the README, which the chain
+patch as an object: a fault of the missed-detection term, see docs/method.md, which the chain
 had not found before.)
 
 :func:`keyframes_of` gives the :class:`KeyframeGraph` of a problem (built once per problem).

@@ -30,7 +30,7 @@ seen", at the MAP of ``J`` (:func:`sightings`):
 - nearer objects, distractors and tables do not together cover more than half of its
   silhouette (the rectangle of its bearing interval and its elevations, up to the top of
   the view). Elevations count: a short object in front of a tall one leaves its upper part
-  in view, which the detector sees. Tables count: DESIGN.md puts every object whose class
+  in view, which the detector sees. Tables count: the data contract puts every object whose class
   stands above the floor on a grey table (``detection.table_diameter_m`` across, as tall as
   the object's base), which the detector does not see but which hides what is behind it.
   Without them, two objects of one class standing where one does (a duplicate) hid what is

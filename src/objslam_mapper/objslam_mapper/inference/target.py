@@ -153,7 +153,7 @@ class AssociationTarget:
 
     def on_table(self, groups: Sequence[GraphGroup], members: Sequence[NDArray[np.int64]]) -> NDArray[np.bool_]:
         """Which groups stand on a table: objects of a class whose base is above the floor
-        (DESIGN.md); distractors are posters and patches, which stand on nothing."""
+        (docs/design.md); distractors are posters and patches, which stand on nothing."""
         return np.array(
             [
                 g[0] == OBJECT and self.problem.prior_mean[self.prior_row(g, m), 2] > 0.0

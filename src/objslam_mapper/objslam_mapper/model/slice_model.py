@@ -2,7 +2,7 @@ r"""Slice measurement model: what the camera sees of a vertical cylinder, with J
 
 An object is a solid vertical cylinder: axis at ``(x, y)``, base at height ``z_b``
 (``location = (x, y, z_b)``), ``size = (d, H)`` (diameter, height), radius ``r = d/2``.
-The camera sits at ``c = mount.camera_pose(map_T_base)`` at height ``h`` (DESIGN.md).
+The camera sits at ``c = mount.camera_pose(map_T_base)`` at height ``h`` (docs/design.md, "Cameras and the mount").
 With the horizontal vector ``delta = (x, y) - c_xy`` and its length ``D = |delta|``
 (``D > r``: the camera is outside the object), the silhouette's extremes are:
 

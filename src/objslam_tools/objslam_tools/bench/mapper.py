@@ -4,7 +4,7 @@ The map build timed is everything after the detector: factor-graph problem, trac
 the MH chain (proposals, screens, graph solves, clutter solves), marginals and Algorithm 1.
 The detector runs first and is timed on its own line (``objslam bench detector`` measures it).
 
-The naive baseline (issue 7) is one fresh GTSAM Levenberg-Marquardt solve per MH step,
+The naive baseline is one fresh GTSAM Levenberg-Marquardt solve per MH step,
 with one CustomFactor per detection (:func:`objslam_tools.bench.naive.time_naive_solves`):
 a few such solves are timed on the chain's start association and proposals from it, and
 extrapolated to the whole chain.

@@ -40,9 +40,9 @@ def run(args: argparse.Namespace) -> int:
 
     from objslam_common.config import load_config
     from objslam_detector import Detector, DetectorConfig
-    from objslam_tools.commands.sim import _StderrProgress
     from objslam_tools.detector_eval import EvalOptions, evaluate_bag, format_report
     from objslam_tools.errors import UserError
+    from objslam_tools.progress import StderrProgress
 
     if args.frames is not None and args.frames < 1:
         raise UserError(f"--frames must be at least 1, got {args.frames}")
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         EvalOptions(min_width_px=args.min_width_px),
         max_frames=args.frames,
         every=args.every,
-        progress=_StderrProgress(f"detecting in {args.bag}"),
+        progress=StderrProgress(f"detecting in {args.bag}"),
         overlay_dir=Path(args.overlays) if args.overlays else None,
     )
     print(json.dumps(evaluation.to_dict(), indent=2) if args.json else format_report(evaluation))

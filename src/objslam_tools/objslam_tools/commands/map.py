@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
-import time
 from pathlib import Path
 
-ASSOCIATIONS = ("sampler", "greedy", "none", "oracle")
+from objslam_tools.mapping import ASSOCIATIONS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -41,20 +41,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import dataclasses
-
-    import cv2
-
     from objslam_common.catalog import load_catalog
     from objslam_common.config import default_config_dir, load_config
     from objslam_detector.config import DetectorConfig
-    from objslam_detector.detector import Detector
     from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
-    from objslam_mapper.pipeline import build_map
     from objslam_tools.bag import open_bag
     from objslam_tools.errors import UserError
-    from objslam_tools.mapper_inputs import detect_bag, odometry_samples
+    from objslam_tools.mapping import bag_inputs, build_association_map, oracle_truth
     from objslam_tools.progress import StderrProgress
 
     for name in ("samples", "burn_in", "seed"):
@@ -74,46 +68,24 @@ def run(args: argparse.Namespace) -> int:
     if config.sampler.burn_in >= config.sampler.samples:
         raise UserError(f"--burn-in ({config.sampler.burn_in}) must be below --samples ({config.sampler.samples})")
     catalog = load_catalog(config.catalog_file or None)
-    oracle_truth = _oracle_truth(bag) if args.association == "oracle" else None
-    cv2.setNumThreads(1)
-    detector = Detector(load_config(DetectorConfig, args.detector_params, "detector"), catalog)
+    truth = oracle_truth(bag) if args.association == "oracle" else None
 
-    started = time.monotonic()
-    odometry = odometry_samples(bag)
-    images = detect_bag(bag, detector, StderrProgress("detecting"))
+    inputs = bag_inputs(bag, load_config(DetectorConfig, args.detector_params, "detector"), catalog)
     sampling = StderrProgress("sampling", unit="samples")
+    associating = StderrProgress("associating", unit="tracklets")
 
     def progress(phase: str, done: int, total: int) -> None:
         if phase == "sampling":
             sampling(done, total)
+        elif phase == "association":
+            associating(done, total)
 
-    if args.association == "sampler":
-        built = build_map(odometry, images, config, catalog, progress=progress)
-    elif args.association == "oracle":
-        from objslam_tools.oracle_map import build_oracle_map
-
-        built = build_oracle_map(odometry, images, catalog, config, *oracle_truth)
-    else:
-        from objslam_mapper.inference.baselines import build_baseline_map
-
-        associating = StderrProgress("associating", unit="tracklets")
-        built = build_baseline_map(
-            odometry,
-            images,
-            catalog,
-            args.association,
-            graph=config.graph,
-            sampler=config.sampler,
-            progress=lambda phase, done, total: associating(done, total) if phase == "association" else None,
-        )
-    elapsed = time.monotonic() - started
-    built = dataclasses.replace(
-        built, diagnostics={**built.diagnostics, "association": args.association, "wall_time_s": round(elapsed, 3)}
-    )
+    built = build_association_map(inputs, args.association, config, catalog, truth=truth, progress=progress)
     write_map(out, built)
+    elapsed = built.diagnostics["wall_time_s"]
     print(
         f"map ({args.association}): {len(built.objects)} objects ({len(built.rejected)} rejected) "
-        f"from {len(images)} images and {len(odometry)} odometry messages in {elapsed:.1f} s -> {out}"
+        f"from {len(inputs.images)} images and {len(inputs.odometry)} odometry messages in {elapsed:.1f} s -> {out}"
     )
     for obj in built.objects:
         x, y, z = obj.position_m
@@ -128,17 +100,3 @@ def run(args: argparse.Namespace) -> int:
         print(f"figures: {', '.join(str(p) for p in paths)}")
     sys.stdout.flush()
     return 0
-
-
-def _oracle_truth(bag):
-    """Ground truth and /ground_truth/odom of a simulated bag, checked before the long work starts."""
-    from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC
-    from objslam_tools.errors import UserError
-    from objslam_tools.ground_truth import GROUND_TRUTH_FILE, load_ground_truth
-
-    if not (bag.directory / GROUND_TRUTH_FILE).is_file():
-        raise UserError(f"--association oracle needs the bag's ground truth: no {GROUND_TRUTH_FILE} in {bag.directory}")
-    truth = load_ground_truth(bag.directory)
-    if not bag.has_topic(GROUND_TRUTH_ODOM_TOPIC):
-        raise UserError(f"--association oracle needs {GROUND_TRUTH_ODOM_TOPIC}, which bag {bag.path} lacks")
-    return truth, bag.read_odometry(GROUND_TRUTH_ODOM_TOPIC)

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
-import time
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -40,28 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-class _StderrProgress:
-    """Frames done / total on stderr: one updating line on a terminal, a line per 10 % otherwise."""
-
-    def __init__(self, label: str) -> None:
-        self.label = label
-        self.tty = sys.stderr.isatty()
-        self.started = time.monotonic()
-        self.last_tenth = -1
-
-    def __call__(self, done: int, total: int) -> None:
-        elapsed = time.monotonic() - self.started
-        text = f"{self.label}: {done}/{total} frames ({elapsed:.0f} s)"
-        if self.tty:
-            print(f"\r{text}", end="\n" if done == total else "", file=sys.stderr, flush=True)
-            return
-        tenth = done * 10 // total
-        if tenth != self.last_tenth:
-            self.last_tenth = tenth
-            print(text, file=sys.stderr, flush=True)
-
-
 def run(args: argparse.Namespace) -> int:
+    from objslam_tools.progress import StderrProgress
     from objslam_tools.sim.scenarios import build_scenario
     from objslam_tools.sim.writer import write_bag
 
@@ -72,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         compressed=args.compressed,
         image_format=args.image_format,
         jpeg_quality=args.jpeg_quality,
-        progress=_StderrProgress(f"rendering {args.scenario}"),
+        progress=StderrProgress(f"rendering {args.scenario}"),
     )
     print(
         f"wrote {summary.path}: {summary.frames} frames, {summary.odom_messages} odometry messages, "

@@ -1,4 +1,4 @@
-"""Covariance of the object errors that `objslam eval` measures, on an oracle map (issue 4's NEES).
+"""Covariance of the object errors that `objslam eval` measures, on an oracle map (the NEES of its covariances).
 
 Usage: objslam diagnose aligned-covariance BAG [--params FILE]
 

@@ -1,4 +1,4 @@
-"""Ray-casting renderer for the omnidirectional camera (unified model, DESIGN.md).
+"""Ray-casting renderer for the omnidirectional camera (unified model, docs/design.md).
 
 Every pixel inside the image circle gets one ray, computed once per camera by
 ``UnifiedCamera.unproject``. Rays are kept sorted by their azimuth in the camera frame,

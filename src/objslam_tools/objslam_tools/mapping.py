@@ -1,0 +1,113 @@
+"""A bag to a map in one process, for any association: what ``objslam map`` and ``objslam results`` run.
+
+The detector runs once per bag (:func:`bag_inputs`); :func:`build_association_map` then
+maps those inputs with the sampler (the default) or a baseline mapped by the same factor
+graph: ``greedy`` (nearest neighbour, Mahalanobis gate), ``none`` (every tracklet its own
+object) or ``oracle`` (the ground-truth association; simulated bags only).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
+
+from objslam_tools.errors import UserError
+
+if TYPE_CHECKING:  # the command line imports this module to build its parsers: the rest loads on use
+    from objslam_common.catalog import Catalog
+    from objslam_common.records import ImageSlices, OdometrySample
+    from objslam_detector.config import DetectorConfig
+    from objslam_mapper.config import MapperConfig
+    from objslam_mapper.map_file import BuiltMap
+    from objslam_tools.bag import Bag
+    from objslam_tools.ground_truth import GroundTruth
+    from objslam_tools.trajectory import PoseTrack
+
+ASSOCIATIONS = ("sampler", "greedy", "none", "oracle")
+
+
+class BagInputs(NamedTuple):
+    """What the mapper gets from a bag: odometry, and the detector's slices per image."""
+
+    odometry: tuple[OdometrySample, ...]
+    images: tuple[ImageSlices, ...]
+    detection_seconds: float
+
+
+class Truth(NamedTuple):
+    """The ground truth of a simulated bag, for the oracle association."""
+
+    objects: GroundTruth
+    track: PoseTrack
+
+
+def bag_inputs(bag: Bag, detector_config: DetectorConfig, catalog: Catalog, progress: bool = True) -> BagInputs:
+    """Run the detector over the bag's images and read its odometry."""
+    import cv2
+
+    from objslam_detector.detector import Detector
+    from objslam_tools.mapper_inputs import detect_bag, odometry_samples
+    from objslam_tools.progress import StderrProgress
+
+    cv2.setNumThreads(1)
+    started = time.monotonic()
+    detector = Detector(detector_config, catalog)
+    odometry = odometry_samples(bag)
+    images = detect_bag(bag, detector, StderrProgress("detecting") if progress else None)
+    return BagInputs(odometry, images, time.monotonic() - started)
+
+
+def oracle_truth(bag: Bag) -> Truth:
+    """Ground truth and /ground_truth/odom of a simulated bag, checked before the long work starts."""
+    from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC
+    from objslam_tools.ground_truth import GROUND_TRUTH_FILE, load_ground_truth
+
+    if not (bag.directory / GROUND_TRUTH_FILE).is_file():
+        raise UserError(f"--association oracle needs the bag's ground truth: no {GROUND_TRUTH_FILE} in {bag.directory}")
+    truth = load_ground_truth(bag.directory)
+    if not bag.has_topic(GROUND_TRUTH_ODOM_TOPIC):
+        raise UserError(f"--association oracle needs {GROUND_TRUTH_ODOM_TOPIC}, which bag {bag.path} lacks")
+    return Truth(truth, bag.read_odometry(GROUND_TRUTH_ODOM_TOPIC))
+
+
+def build_association_map(
+    inputs: BagInputs,
+    association: str,
+    config: MapperConfig,
+    catalog: Catalog,
+    *,
+    truth: Truth | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> BuiltMap:
+    """The map of ``inputs`` under ``association`` (module docstring), with its wall time and
+    association in the diagnostics; ``truth`` is needed for ``oracle``."""
+    from objslam_mapper.pipeline import build_map
+
+    started = time.monotonic()
+    if association == "sampler":
+        built = build_map(inputs.odometry, inputs.images, config, catalog, progress=progress)
+    elif association == "oracle":
+        from objslam_tools.oracle_map import build_oracle_map
+
+        if truth is None:
+            raise UserError("the oracle association needs the bag's ground truth")
+        built = build_oracle_map(inputs.odometry, inputs.images, catalog, config, truth.objects, truth.track)
+    elif association in ASSOCIATIONS:
+        from objslam_mapper.inference.baselines import build_baseline_map
+
+        built = build_baseline_map(
+            inputs.odometry,
+            inputs.images,
+            catalog,
+            association,
+            graph=config.graph,
+            sampler=config.sampler,
+            progress=progress,
+        )
+    else:
+        raise UserError(f"unknown association {association!r} (one of {', '.join(ASSOCIATIONS)})")
+    elapsed = time.monotonic() - started + inputs.detection_seconds
+    extra = {"association": association, "wall_time_s": round(elapsed, 3)}
+    return dataclasses.replace(built, diagnostics={**built.diagnostics, **extra})

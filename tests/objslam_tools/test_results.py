@@ -1,0 +1,69 @@
+"""``objslam results``: the page and the README's table, from maps scored against the ground truth."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+from objslam_tools.errors import UserError
+from objslam_tools.results import README_BEGIN, README_END, Row, Scenario, table, with_readme_table
+from tests.conftest import objslam_cmd
+
+GOOD = {
+    "map_objects": 5,
+    "truth_objects": 5,
+    "precision": 1.0,
+    "recall": 1.0,
+    "xy_error_median_m": 0.01,
+    "diameter_error_mean_m": 0.004,
+    "height_error_mean_m": 0.006,
+    "trajectory_ate_m": 0.03,
+    "odometry_ate_m": 0.08,
+    "distractors_as_objects": 0,
+}
+
+
+def test_a_row_meets_the_targets_one_by_one():
+    assert Row("small", "sampler", GOOD, 5.0).meets() == [True] * 6
+    worse = {**GOOD, "precision": 0.8, "xy_error_median_m": 0.06, "trajectory_ate_m": 0.05}
+    assert Row("small", "sampler", worse, 5.0).meets() == [False, True, False, True, False, True]
+    # An ATE of 2 cm or less passes whatever the odometry's.
+    assert Row("s", "a", {**GOOD, "trajectory_ate_m": 0.015, "odometry_ate_m": 0.01}, 1.0).meets()[4]
+    none = {**GOOD, "precision": None, "recall": None, "xy_error_median_m": None}
+    assert Row("s", "a", none, 1.0).meets()[:3] == [False, False, False]
+
+
+def test_scenarios_name_their_seed_unless_bundled():
+    assert Scenario.parse("small") == Scenario("small", 2) and Scenario.parse("small").label == "small"
+    assert Scenario.parse("twins") == Scenario("twins", 1) and Scenario.parse("twins").label == "twins:1"
+    assert Scenario.parse("office:7").label == "office:7"
+    with pytest.raises(UserError):
+        Scenario.parse("office:x")
+
+
+def test_the_readme_table_is_replaced_between_its_markers():
+    rows = [Row("small", "sampler", GOOD, 5.0), Row("small", "none", {**GOOD, "precision": 0.5}, 1.0)]
+    readme = f"# objslam\n\ntext\n\n{README_BEGIN}\nold\n{README_END}\n\nmore\n"
+    updated = with_readme_table(readme, rows)
+    assert "old" not in updated and updated.endswith(f"{README_END}\n\nmore\n")
+    assert "| small | sampler | 5/5 |" in updated and "| none |" not in updated
+    assert "| 6/6 |" in table(rows) and "| 5/6 |" in table(rows)
+    with pytest.raises(UserError):
+        with_readme_table("# no markers\n", rows)
+
+
+@pytest.mark.slow
+def test_the_command_writes_a_page_that_names_its_command_and_commit(tmp_path):
+    out = tmp_path / "results.md"
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n{README_BEGIN}\n{README_END}\n")
+    args = ["results", "--scenarios", "small", "--associations", "none", "--out", str(out), "--readme", str(readme)]
+    done = subprocess.run(objslam_cmd(*args), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    text = out.read_text()
+    assert "objslam results --scenarios small --associations none" in text and "commit `" in text
+    assert "| small | none |" in text
+    assert "| small |" not in readme.read_text()  # the README shows the sampler's rows only
+    bad = subprocess.run(objslam_cmd("results", "--scenarios", "nope", "--no-readme"), capture_output=True, text=True)
+    assert bad.returncode == 2 and "unknown scenario 'nope'" in bad.stderr
