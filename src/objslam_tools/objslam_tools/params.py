@@ -11,6 +11,8 @@ import re
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import yaml
+
 from objslam_common.config import EXPERT_MARK, parameter_file, parameters
 from objslam_detector.config import DetectorConfig
 from objslam_mapper.config import MapperConfig
@@ -51,7 +53,7 @@ def parameter_table(node: str) -> str:
         description = p.description.replace("|", "\\|")
         if p.expert:
             description = f"{EXPERT_MARK} {description}"
-        default = "`[]`" if p.value == [] else f"`{p.value!r}`" if isinstance(p.value, str) else f"`{p.value}`"
+        default = "`" + yaml.safe_dump([p.value], default_flow_style=True, width=10_000).strip()[1:-1] + "`"
         rows.append(f"| `{p.name}` | {default} | {description} |")
     return "\n".join(rows) + "\n"
 

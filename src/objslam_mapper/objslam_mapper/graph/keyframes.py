@@ -23,7 +23,7 @@ as independent they would know that error ``k`` times better than it is known (o
 simulated runs at two to three images per keyframe the objects' NEES tripled and their
 error grew by 70 %), so each takes ``k`` times the added variance: together they weigh the shared
 error as one slice would, and the maps match those of a pose per image
-(``tests/objslam_mapper/test_keyframes.py``). The odometry factors join consecutive
+(``tests/objslam_mapper/graph/test_keyframes.py``). The odometry factors join consecutive
 keyframes with the composed increments, their noise the model's for the path and turn
 between them. (Both take the noise model's floor, ``odometry.min_*_stddev``, once per
 interval, as the odometry of the interval itself would: summed over the increments of a

@@ -31,8 +31,7 @@ from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, build_problem
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, simulate_run
-
-from .graph_scenes import CATALOG, CONFIG, MOUNT, STEP_NS, draw_scene, object_nees
+from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, STEP_NS, draw_scene, object_nees
 
 
 def with_error_covariance(config: GraphConfig, **fields) -> GraphConfig:

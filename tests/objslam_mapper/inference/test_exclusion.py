@@ -13,8 +13,7 @@ from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.exclusion import near_pairs, no_overlap_log_probability, pairs_log_probability
 from objslam_mapper.inference.target import AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import tracklets_of_problem
-
-from .association_scenes import problem_of, simulate
+from tests.objslam_mapper.association_scenes import problem_of, simulate
 
 
 @pytest.fixture(scope="module")

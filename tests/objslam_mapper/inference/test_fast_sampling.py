@@ -62,8 +62,7 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
     from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
     from objslam_mapper.inference.chain import MetropolisHastings
     from objslam_mapper.inference.exact import ExactDistribution
-
-    from .test_sampler import random_problem
+    from tests.objslam_mapper.inference.test_sampler import random_problem
 
     labels = ["r", "r", "g", "g"]
     states, scores, positions, weights = random_problem(labels, seed=0, clutter=True)
@@ -101,8 +100,7 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
     from objslam_mapper.inference.association import CLUTTER, Association
     from objslam_mapper.inference.chain import MetropolisHastings
     from objslam_mapper.inference.exact import ExactDistribution
-
-    from .test_sampler import random_problem
+    from tests.objslam_mapper.inference.test_sampler import random_problem
 
     labels = ["r", "r", "g", "g"]
     states, scores, positions, weights = random_problem(labels, seed=0, clutter=True)

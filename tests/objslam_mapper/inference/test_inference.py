@@ -23,8 +23,15 @@ from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, AssociationT
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
 from objslam_mapper.pipeline import build_map
 from objslam_mapper.synthetic import SyntheticObject
-
-from .association_scenes import GREEN, POSTER_FRAMES, RED_A, RED_B, problem_of, simulate, with_poster
+from tests.objslam_mapper.association_scenes import (
+    GREEN,
+    POSTER_FRAMES,
+    RED_A,
+    RED_B,
+    problem_of,
+    simulate,
+    with_poster,
+)
 
 # The scenes' slices come from within 3.5 m (association_scenes): the detector sees no farther.
 QUICK = SamplerConfig(samples=500, burn_in=150, detection=DetectionConfig(max_range_m=3.5))

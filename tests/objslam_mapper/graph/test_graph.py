@@ -25,8 +25,7 @@ from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem,
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.model.slice_model import predict_slices, slice_error
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
-
-from .graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
+from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
 
 # Both ways of solving the linear systems: dense Schur complement (few objects), sparse LU.
 SOLVERS = pytest.mark.parametrize("dense_object_limit", [40, 0], ids=["schur", "sparse"])
