@@ -6,17 +6,14 @@ import argparse
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from objslam_tools.bench import targets
+    from objslam_tools import bench
+    from objslam_tools.subcommands import register_group
 
-    found = targets()
-    parser = subparsers.add_parser(
+    register_group(
+        subparsers,
         "bench",
-        help="measure speed (e.g. `objslam bench detector`)",
-        description="Measure how fast a part of objslam runs. Targets: " + ", ".join(found) + ".",
+        bench,
+        "measure speed (e.g. `objslam bench detector`)",
+        "Measure how fast a part runs",
+        metavar="TARGET",
     )
-    sub = parser.add_subparsers(dest="target", metavar="TARGET")
-    sub.required = True
-    for name, module in found.items():
-        target = sub.add_parser(name, help=module.DESCRIPTION, description=module.DESCRIPTION)
-        module.add_arguments(target)
-        target.set_defaults(func=module.run)

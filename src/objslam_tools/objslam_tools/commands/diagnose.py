@@ -6,17 +6,13 @@ import argparse
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from objslam_tools.diagnose import diagnostics
+    from objslam_tools import diagnose
+    from objslam_tools.subcommands import register_group
 
-    found = diagnostics()
-    parser = subparsers.add_parser(
+    register_group(
+        subparsers,
         "diagnose",
-        help="measure the method on simulated bags (e.g. `objslam diagnose error-budget BAG`)",
-        description="Diagnostics of the method on simulated bags: " + ", ".join(found) + ".",
+        diagnose,
+        "measure the method on simulated bags (e.g. `objslam diagnose error-budget BAG`)",
+        "Diagnostics of the method on simulated bags",
     )
-    sub = parser.add_subparsers(dest="diagnostic", metavar="NAME")
-    sub.required = True
-    for name, module in found.items():
-        target = sub.add_parser(name, help=module.DESCRIPTION, description=module.DESCRIPTION)
-        module.add_arguments(target)
-        target.set_defaults(func=module.run)
