@@ -12,7 +12,11 @@ from objslam_mapper.map_file import BuiltMap, MapFileError, MappedObject, Trajec
 def _map() -> BuiltMap:
     cov = tuple(tuple(float(v) for v in row) for row in np.diag([0.01, 0.02, 0.0001]))
     return BuiltMap(
-        objects=(MappedObject(3, "red", (1.0, 2.0, 0.0), (0.3, 0.6), 0.93, cov, ((1e-4, 0.0), (0.0, 4e-4)), 42),),
+        objects=(
+            MappedObject(
+                3, "red", (1.0, 2.0, 0.0), (0.3, 0.6), 0.93, cov, ((1e-4, 0.0), (0.0, 4e-4)), 42, (0.9, 0.96, 0.93)
+            ),
+        ),
         rejected=(MappedObject(7, "cyan", (4.0, -1.0, 0.75), (0.15, 0.25), 0.2),),
         trajectory=(TrajectoryPose(1_700_000_000_250_000_000, 0.5, -0.25, 0.1),),
         diagnostics={"samples": 6000, "burn_in": 2500, "acceptance": {"merge": np.float64(0.1)}},

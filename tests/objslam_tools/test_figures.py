@@ -85,3 +85,23 @@ def test_overlay_outline_encloses_the_rendered_object(bag_dir):
     near_rim = np.min(np.linalg.norm(uv[:, None, :] - nearest, axis=2), axis=1) <= 1.0
     assert np.all(inside | near_rim)
     assert inside.mean() > 0.5
+
+
+def test_the_chains_figure_traces_each_chain(tmp_path):
+    runs = [
+        {
+            "chain": k,
+            "start": start,
+            "trace": {
+                "every_steps": 20,
+                "log_target": list(900.0 + 100 * np.tanh(np.arange(50) / (5 + 10 * k))),
+                "objects": [12 - min(k + i // 10, 8) for i in range(50)],
+            },
+        }
+        for k, start in enumerate(("heuristic", "singletons", "greedy"))
+    ]
+    diagnostics = {"chain_runs": runs, "burn_in": 400, "convergence": {"converged": False, "rhat_max": 1.3}}
+    paths = write_figures(replace(scene.perfect_map(), diagnostics=diagnostics), tmp_path, prefix="run")
+    assert [p.name for p in paths] == ["run_top_down.png", "run_chains.png"]
+    _assert_real_picture(paths[1])
+    assert write_figures(scene.perfect_map(), tmp_path / "one")[-1].name == "map_top_down.png"  # no traces: none

@@ -466,13 +466,39 @@ class ScreenConfig:
     )
 
 
+CHAIN_STARTS = ("heuristic", "singletons", "greedy", "clutter", "random")
+
+
 @dataclass(frozen=True)
 class SamplerConfig:
     """The association sampler and map building (the mapper's ``sampler.*`` parameters)."""
 
-    samples: int = setting(6000, "MH steps in all, burn-in included (paper: 6000)", minimum=1)
-    burn_in: int = setting(2500, "first steps left out of the map (paper: 2500)", minimum=0)
-    seed: int = setting(1, "random seed of the chain (same seed, same inputs: same map)", minimum=0)
+    chains: int = setting(
+        4,
+        "Metropolis-Hastings chains, each from its own start (see starts), their kept samples pooled for the "
+        "map; with 2 or more the map says whether they agree (converged)",
+        minimum=1,
+    )
+    samples: int = setting(6000, "MH steps of each chain, burn-in included (paper: 6000)", minimum=1)
+    burn_in: int = setting(2500, "first steps of each chain left out of the map (paper: 2500)", minimum=0)
+    seed: int = setting(
+        1, "random seed: the chains' seeds are derived from it (same seed, same inputs: same map)", minimum=0
+    )
+    starts: tuple[str, ...] = setting(
+        ("heuristic", "singletons", "greedy", "clutter"),
+        "the start of each chain in turn, dispersed on purpose: heuristic (near neighbours joined, the likely "
+        "clutter cleared), singletons (every tracklet its own object), greedy (nearest neighbour with a "
+        "Mahalanobis gate), clutter (every tracklet clutter), random (a random association); chains beyond "
+        "the list start random",
+        expert=True,
+    )
+    rhat_max: float = setting(
+        1.01,
+        "the chains agree (converged) when every R-hat (log target, objects, each reported identity) is at "
+        "most this and every reported identity is on the same side of 1/2 in every chain",
+        minimum=1.0,
+        expert=True,
+    )
     moves: MoveConfig = setting(MoveConfig(), "proposal moves", expert=True)
     tracklets: TrackletConfig = setting(TrackletConfig(), "chaining slices into tracklets", expert=True)
     clutter: ClutterConfig = setting(ClutterConfig(), "false-alarm model", expert=True)
@@ -533,6 +559,9 @@ class SamplerConfig:
     def __post_init__(self) -> None:
         if self.burn_in >= self.samples:
             raise ValueError(f"burn_in ({self.burn_in}) must be smaller than samples ({self.samples})")
+        unknown = [s for s in self.starts if s not in CHAIN_STARTS]
+        if unknown:
+            raise ValueError(f"unknown chain start {unknown[0]!r} (one of {', '.join(CHAIN_STARTS)})")
 
 
 @dataclass(frozen=True)
@@ -547,6 +576,29 @@ class RosConfig:
     output_dir: str = setting("", "if set, write map.yaml here after each build")
 
 
+PARALLEL_BACKENDS = ("ray", "inprocess")
+
+
+@dataclass(frozen=True)
+class ParallelConfig:
+    """Where the chains run: Ray tasks (a local Ray started on demand, or an existing cluster) or
+    one after another in this process. One chain always runs in this process."""
+
+    backend: str = setting("ray", "ray (chains as Ray tasks, in parallel) or inprocess (one after another)")
+    ray_address: str = setting(
+        "",
+        "an existing Ray cluster to run the chains on (e.g. 10.0.0.5:6379, or auto); empty: the RAY_ADDRESS "
+        "environment variable if set, else a local Ray started on demand",
+    )
+    workers: int = setting(0, "CPUs of a local Ray (0: every core of this machine)", minimum=0)
+
+    def __post_init__(self) -> None:
+        if self.backend not in PARALLEL_BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(PARALLEL_BACKENDS)}, got {self.backend!r}")
+        if self.workers < 0:
+            raise ValueError(f"workers must be >= 0 (0: every core), got {self.workers}")
+
+
 @dataclass(frozen=True)
 class MapperConfig:
     """The mapper's whole configuration: ``objslam map`` and the mapper node read the same."""
@@ -557,6 +609,7 @@ class MapperConfig:
     slice_noise: SliceNoiseConfig = setting(SliceNoiseConfig(), "slice measurement noise")
     solver: SolverConfig = setting(SolverConfig(), "known-association solver")
     sampler: SamplerConfig = setting(SamplerConfig(), "association sampler and map building")
+    parallel: ParallelConfig = setting(ParallelConfig(), "where the chains run")
     ros: RosConfig = setting(RosConfig(), "mapper node topics, buffers and outputs")
 
     @property

@@ -39,6 +39,7 @@ class MappedObject:
     position_covariance: tuple[tuple[float, ...], ...] = ((0.0,) * 3,) * 3  # m^2, 3x3
     size_covariance: tuple[tuple[float, ...], ...] = ((0.0,) * 2,) * 2  # m^2, 2x2
     measurement_count: int = 0
+    existence_by_chain: tuple[float, ...] = ()  # P(ID|Z) of each chain's samples alone (several chains)
 
 
 @dataclass(frozen=True)
@@ -81,7 +82,7 @@ def _plain(value: Any) -> Any:
 
 
 def _object_to_dict(obj: MappedObject) -> dict[str, Any]:
-    return {
+    entry = {
         "id": int(obj.id),
         "label": obj.label,
         "position": [float(v) for v in obj.position_m],
@@ -91,19 +92,33 @@ def _object_to_dict(obj: MappedObject) -> dict[str, Any]:
         "size_covariance": _plain(obj.size_covariance),
         "measurement_count": int(obj.measurement_count),
     }
+    if obj.existence_by_chain:
+        entry["existence_probability_by_chain"] = [float(p) for p in obj.existence_by_chain]
+    return entry
 
 
 def _object_from_dict(d: dict[str, Any]) -> MappedObject:
     return MappedObject(
         id=int(d["id"]),
         label=str(d["label"]),
-        position_m=tuple(float(v) for v in d["position"]),  # type: ignore[arg-type]
-        size_m=tuple(float(v) for v in d["size"]),  # type: ignore[arg-type]
+        position_m=_triple(d["position"]),
+        size_m=_pair(d["size"]),
         existence_probability=float(d["existence_probability"]),
         position_covariance=_matrix(d.get("position_covariance", np.zeros((3, 3))), 3),
         size_covariance=_matrix(d.get("size_covariance", np.zeros((2, 2))), 2),
         measurement_count=int(d.get("measurement_count", 0)),
+        existence_by_chain=tuple(float(p) for p in d.get("existence_probability_by_chain") or ()),
     )
+
+
+def _triple(value: Any) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in value)
+    return (x, y, z)
+
+
+def _pair(value: Any) -> tuple[float, float]:
+    a, b = (float(v) for v in value)
+    return (a, b)
 
 
 def map_to_dict(built: BuiltMap) -> dict[str, Any]:

@@ -328,6 +328,9 @@ def write_figures(
             logger.info("no overlays: %s", exc)
 
     paths = [_save(top_down_figure(built_map, reference, catalog, title), out / f"{prefix}_top_down.png")]
+    chains = chains_figure(built_map, title)
+    if chains is not None:
+        paths.append(_save(chains, out / f"{prefix}_chains.png"))
     if opened is None or image_topic is None or not chosen:
         return paths
     camera = _camera(opened)
@@ -340,6 +343,42 @@ def write_figures(
             if not wanted:
                 break
     return paths
+
+
+def chains_figure(built_map: BuiltMap, title: str = "map") -> Figure | None:
+    """Per chain, the trace of the log target and of the number of objects, burn-in included
+    (from the map's ``diagnostics.chain_runs``); None for a map without chain traces."""
+    runs = [r for r in built_map.diagnostics.get("chain_runs") or [] if r.get("trace")]
+    if not runs:
+        return None
+    fig = Figure(figsize=(9.0, 6.0), dpi=_DPI)
+    FigureCanvasAgg(fig)
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    for run in runs:
+        trace = run["trace"]
+        steps = trace["every_steps"] * (1 + np.arange(len(trace["log_target"])))
+        name = f"chain {run['chain']} ({run['start']})"
+        top.plot(steps, trace["log_target"], linewidth=1.0, label=name)
+        bottom.step(steps, trace["objects"], where="post", linewidth=1.0, label=name)
+    burn_in = built_map.diagnostics.get("burn_in")
+    for ax in (top, bottom):
+        if burn_in:
+            ax.axvline(burn_in, color="0.5", linestyle=":", linewidth=1.0)
+        ax.grid(True, alpha=0.3)
+    convergence = built_map.diagnostics.get("convergence") or {}
+    verdict = {True: "converged", False: "NOT converged", None: "one chain"}[convergence.get("converged")]
+    top.set_title(f"{title}: chains ({verdict}; R-hat max {convergence.get('rhat_max')}); dotted: end of burn-in")
+    top.set_ylabel("log target")
+    bottom.set_ylabel("objects")
+    bottom.set_xlabel("step")
+    top.legend(fontsize=8, loc="lower right")
+    # Dispersed starts begin thousands of nats below the mode: show the part where chains meet.
+    finals = [v for r in runs for v in r["trace"]["log_target"][len(r["trace"]["log_target"]) // 2 :]]
+    if finals:
+        low, high = min(finals), max(finals)
+        pad = max(10.0, 0.2 * (high - low))
+        top.set_ylim(low - pad, high + pad)
+    return fig
 
 
 def _camera(bag: Bag) -> UnifiedCamera:

@@ -20,6 +20,7 @@ if TYPE_CHECKING:  # the command line imports this module to build its parsers: 
     from objslam_common.records import ImageSlices, OdometrySample
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
+    from objslam_mapper.inference.chains import ChainRunner
     from objslam_mapper.map_file import BuiltMap
     from objslam_tools.bag import Bag
     from objslam_tools.ground_truth import GroundTruth
@@ -80,14 +81,16 @@ def build_association_map(
     *,
     truth: Truth | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    runner: ChainRunner | None = None,
 ) -> BuiltMap:
     """The map of ``inputs`` under ``association`` (module docstring), with its wall time and
-    association in the diagnostics; ``truth`` is needed for ``oracle``."""
+    association in the diagnostics; ``truth`` is needed for ``oracle``, ``runner`` runs the
+    sampler's chains (default: in this process)."""
     from objslam_mapper.pipeline import build_map
 
     started = time.monotonic()
     if association == "sampler":
-        built = build_map(inputs.odometry, inputs.images, config, catalog, progress=progress)
+        built = build_map(inputs.odometry, inputs.images, config, catalog, progress=progress, runner=runner)
     elif association == "oracle":
         from objslam_tools.oracle_map import build_oracle_map
 
@@ -111,3 +114,17 @@ def build_association_map(
     elapsed = time.monotonic() - started + inputs.detection_seconds
     extra = {"association": association, "wall_time_s": round(elapsed, 3)}
     return dataclasses.replace(built, diagnostics={**built.diagnostics, **extra})
+
+
+def convergence_line(convergence: dict) -> str:
+    """One line on the chains' agreement, from a map's ``diagnostics.convergence``."""
+    chains = convergence["chains"]
+    if convergence["converged"] is None:
+        return f"chains: {chains} (one chain: its convergence cannot be judged)"
+    verdict = "yes" if convergence["converged"] else "no"
+    line = (
+        f"chains: {chains}, converged: {verdict} (R-hat max {convergence['rhat_max']}, "
+        f"bulk ESS min {convergence['ess_bulk_min']})"
+    )
+    reasons = convergence.get("disagreements") or []
+    return line + "".join(f"\n  {reason}" for reason in reasons)

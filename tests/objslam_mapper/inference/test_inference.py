@@ -34,7 +34,7 @@ from tests.objslam_mapper.association_scenes import (
 )
 
 # The scenes' slices come from within 3.5 m (association_scenes): the detector sees no farther.
-QUICK = SamplerConfig(samples=500, burn_in=150, detection=DetectionConfig(max_range_m=3.5))
+QUICK = SamplerConfig(samples=500, burn_in=150, chains=1, detection=DetectionConfig(max_range_m=3.5))
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +169,7 @@ def test_two_objects_of_one_class_08_m_apart_stay_two_objects(scene):
     assert len(reds) == 2 and len(built.objects) == 3
     assert any(_near(o, RED_A, 0.15) for o in reds) and any(_near(o, RED_B, 0.15) for o in reds)
     assert all(o.existence_probability > 0.5 for o in built.objects)
-    assert built.diagnostics["start_objects"] > 3  # the sampler, not the start state, joined them
+    assert built.diagnostics["chain_runs"][0]["start_objects"] > 3  # the sampler, not the start state, joined them
 
 
 def test_a_poster_seen_from_a_few_poses_does_not_become_an_object():
@@ -182,7 +182,7 @@ def test_a_poster_seen_from_a_few_poses_does_not_become_an_object():
     assert len(greens) == 1 and _near(greens[0], GREEN, 0.2)
     assert greens[0].measurement_count == green_slices  # the poster's slices are not in it
     assert not any(np.hypot(o.position_m[0] - 3.0, o.position_m[1] + 2.5) < 1.0 for o in built.objects)
-    assert built.diagnostics["best_state_clutter_tracklets"] == 1
+    assert built.diagnostics["chain_runs"][0]["best_state_clutter_tracklets"] == 1
 
 
 def test_build_map_runs_the_pipeline_deterministically():
@@ -203,8 +203,10 @@ def test_build_map_runs_the_pipeline_deterministically():
     assert [p.stamp_ns for p in built.trajectory] == [im.stamp_ns for im in run.images]
     assert np.abs(built.trajectory_array()[:, :2] - run.true_map_T_base[:, :2]).max() < 0.3
     diagnostics = built.diagnostics
-    for key in ("samples", "burn_in", "acceptance_rates", "distinct_associations_visited", "tracklets", "graph_poses"):
+    for key in ("samples", "burn_in", "chain_runs", "convergence", "tracklets", "graph_poses"):
         assert key in diagnostics
+    for key in ("start", "acceptance_rates", "distinct_associations_visited", "best_log_target", "trace"):
+        assert key in diagnostics["chain_runs"][0]
     assert diagnostics["samples"] == 500 and diagnostics["kept_samples"] == 350
 
 
@@ -252,7 +254,7 @@ def test_a_floor_patch_prefers_clutter_and_starts_there_while_a_short_object_doe
         else:
             assert margin < -3.0 and not target.prefers_clutter(t)
     built = infer_map(problem, QUICK)
-    assert built.diagnostics["start_clutter_tracklets"] == chained.labels.count("blue")
+    assert built.diagnostics["chain_runs"][0]["start_clutter_tracklets"] == chained.labels.count("blue")
     assert [o.label for o in built.objects] == ["yellow"]
 
 

@@ -263,8 +263,8 @@ DRIVER = textwrap.dedent(
     def plain(response):
         return {f: getattr(response, f) for f in response.get_fields_and_field_types()}
 
-    def build(samples=0, burn_in=0, seed=0, second_while_running=False):
-        request = BuildMap.Request(samples=samples, burn_in=burn_in, seed=seed)
+    def build(samples=0, burn_in=0, seed=0, chains=0, second_while_running=False):
+        request = BuildMap.Request(samples=samples, burn_in=burn_in, seed=seed, chains=chains)
         progress.clear()
         started = time.monotonic()
         first = build_client.call_async(request)
@@ -305,7 +305,9 @@ DRIVER = textwrap.dedent(
             "markers": markers,
             "trajectory": {"frame_id": path.header.frame_id, "poses": len(path.poses)},
             "objects": {"frame_id": objects.header.frame_id, "labels": sorted(o.label for o in objects.objects),
-                        "samples": objects.samples, "burn_in": objects.burn_in},
+                        "samples": objects.samples, "burn_in": objects.burn_in, "chains": objects.chains,
+                        "converged": objects.converged, "rhat_max": objects.rhat_max,
+                        "by_chain": [list(o.existence_probability_by_chain) for o in objects.objects]},
         }
 
     ops = {
@@ -393,7 +395,7 @@ def _cylinders(received: dict) -> list[dict]:
 
 def test_a_build_answers_with_its_time_and_count_refuses_a_second_and_latches_all_maps(mapper, driver):
     assert driver("run") == {"odometry": 40, "slices": 40}
-    answer = driver("build", samples=1000, burn_in=200, seed=3, second_while_running=True)
+    answer = driver("build", samples=1000, burn_in=200, seed=3, chains=2, second_while_running=True)
     second = answer["second"]
     assert second["success"] is False
     assert "a build is already running" in second["message"]
@@ -402,7 +404,10 @@ def test_a_build_answers_with_its_time_and_count_refuses_a_second_and_latches_al
     assert response["success"] is True, response["message"]
     assert 0.0 < response["elapsed_sec"] <= answer["round_trip_sec"]
     assert f"built a map of {response['object_count']} objects" in response["message"]
-    assert "from 40 images; no message was dropped" in response["message"]
+    assert response["chains"] == 2 and response["rhat_max"] >= 1.0
+    verdict = "converged" if response["converged"] else "NOT converged"
+    assert f"from 40 images; 2 chains, {verdict} (R-hat max " in response["message"]
+    assert response["message"].endswith("no message was dropped")
 
     # A late subscriber gets all three maps of this build (1000 samples), the count matching.
     received = driver("received_map")
@@ -410,11 +415,15 @@ def test_a_build_answers_with_its_time_and_count_refuses_a_second_and_latches_al
     assert len(_cylinders(received)) == response["object_count"]
     assert len(received["objects"]["labels"]) == response["object_count"]
     assert received["trajectory"] == {"frame_id": "odom", "poses": 40}
-    assert {k: received["objects"][k] for k in ("frame_id", "samples", "burn_in")} == {
+    assert {k: received["objects"][k] for k in ("frame_id", "samples", "burn_in", "chains", "converged")} == {
         "frame_id": "odom",
         "samples": 1000,
         "burn_in": 200,
+        "chains": 2,
+        "converged": response["converged"],
     }
+    assert received["objects"]["rhat_max"] == pytest.approx(response["rhat_max"])
+    assert all(len(p) == 2 and all(0.0 <= x <= 1.0 for x in p) for p in received["objects"]["by_chain"])
 
     # Still answering after the refusal: the refused call did not leave the build lock taken.
     assert driver("build", samples=50, burn_in=10)["response"]["success"] is True

@@ -141,23 +141,27 @@ class _Identity:
 
 def _group_identities(
     identities: dict[frozenset[int], _Identity], overlap: float
-) -> list[tuple[frozenset[int], _Identity]]:
-    """Exact identities grouped up to ``overlap`` (module docstring): (most frequent member, merged sums)."""
+) -> tuple[list[tuple[frozenset[int], _Identity]], dict[frozenset[int], int]]:
+    """Exact identities grouped up to ``overlap`` (module docstring): (most frequent member, merged
+    sums) per group, and the group of each exact identity."""
     groups: list[tuple[frozenset[int], _Identity]] = []
+    group_of: dict[frozenset[int], int] = {}
     ordered = sorted(identities.items(), key=lambda item: (-item[1].held, min(item[0])))
     for identity, entry in ordered:
-        for head, merged in groups:
+        for k, (head, merged) in enumerate(groups):
             if merged.label != entry.label:
                 continue
             shared = len(identity & head)
             if shared >= overlap * len(identity) and shared >= overlap * len(head):
                 merged.absorb(entry)
+                group_of[identity] = k
                 break
         else:
             fresh = _Identity(entry.label)
             fresh.absorb(entry)
+            group_of[identity] = len(groups)
             groups.append((identity, fresh))
-    return groups
+    return groups, group_of
 
 
 def _mean_trajectory(weighted: Sequence[tuple[NDArray[np.float64], float]]) -> NDArray[np.float64]:
@@ -210,11 +214,37 @@ def build_from_samples(
     yields are reported as rejected when at least ``report_min_fraction`` of the samples
     hold them (spurious or not).
     """
+    built, _ = map_and_yields(
+        samples,
+        stamps_ns,
+        spurious_location_stddev_m=spurious_location_stddev_m,
+        existence_threshold=existence_threshold,
+        report_min_fraction=report_min_fraction,
+        identity_overlap=identity_overlap,
+        diagnostics=diagnostics,
+    )
+    return built
+
+
+def map_and_yields(
+    samples: Iterable[tuple[SampleSummary, int]],
+    stamps_ns: Sequence[int] | NDArray[np.int64],
+    *,
+    spurious_location_stddev_m: float = 0.30,
+    existence_threshold: float = 0.5,
+    report_min_fraction: float = 0.05,
+    identity_overlap: float = 1.0,
+    diagnostics: dict[str, Any] | None = None,
+) -> tuple[BuiltMap, list[frozenset[int]]]:
+    """:func:`build_from_samples`, and for each sample (in the order given) the ids of the map's
+    identities (objects and rejected) it yields: the indicators the chains' agreement is judged on."""
     identities: dict[frozenset[int], _Identity] = {}
     trajectories: list[tuple[NDArray[np.float64], float]] = []
     calibrations: list[tuple[SampleSummary, float]] = []
     total = 0
+    yielded: list[set[frozenset[int]]] = []
     for summary, count in samples:
+        yielded.append(set())
         if count <= 0:
             continue
         total += count
@@ -222,7 +252,10 @@ def build_from_samples(
         calibrations.append((summary, float(count)))
         for obj in summary.objects:
             entry = identities.setdefault(obj.identity, _Identity(obj.label))
-            entry.add(obj, float(count), not is_spurious(obj, spurious_location_stddev_m))
+            kept = not is_spurious(obj, spurious_location_stddev_m)
+            entry.add(obj, float(count), kept)
+            if kept:
+                yielded[-1].add(obj.identity)
     if total == 0:
         raise MapBuildError("no samples to build a map from")
     if len({t.shape for t, _ in trajectories}) != 1 or trajectories[0][0].shape != (len(stamps_ns), 3):
@@ -231,21 +264,23 @@ def build_from_samples(
     if not 0.5 < identity_overlap <= 1.0:
         raise MapBuildError(f"identity_overlap must lie in (0.5, 1], got {identity_overlap}")
     rows = []
-    for identity, entry in _group_identities(identities, identity_overlap):
+    groups, group_of = _group_identities(identities, identity_overlap)
+    for k, (identity, entry) in enumerate(groups):
         probability = entry.weight[True] / total
         seen = (entry.weight[True] + entry.weight[False]) / total
         if probability > existence_threshold or seen >= report_min_fraction:
-            rows.append((identity, entry, probability))
+            rows.append((identity, entry, probability, k))
     rows.sort(key=lambda r: (-r[2], min(r[0])))
+    map_id_of_group = {row[3]: number for number, row in enumerate(rows)}
     objects: list[MappedObject] = []
     rejected: list[MappedObject] = []
-    for number, (identity, entry, probability) in enumerate(rows):
+    for number, (identity, entry, probability, _) in enumerate(rows):
         mean, cov = entry.moments()
         mapped = MappedObject(
             id=number,
             label=entry.label,
-            position_m=tuple(float(v) for v in mean[:3]),  # type: ignore[arg-type]
-            size_m=tuple(float(v) for v in mean[3:]),  # type: ignore[arg-type]
+            position_m=(float(mean[0]), float(mean[1]), float(mean[2])),
+            size_m=(float(mean[3]), float(mean[4])),
             existence_probability=float(probability),
             position_covariance=tuple(tuple(float(v) for v in row) for row in cov[:3, :3]),
             size_covariance=tuple(tuple(float(v) for v in row) for row in cov[3:, 3:]),
@@ -271,4 +306,8 @@ def build_from_samples(
     calibration = _mean_calibration(calibrations)
     if calibration is not None:
         info["odometry_calibration"] = calibration
-    return BuiltMap(objects=tuple(objects), rejected=tuple(rejected), trajectory=poses, diagnostics=info)
+    built = BuiltMap(objects=tuple(objects), rejected=tuple(rejected), trajectory=poses, diagnostics=info)
+    yields = [
+        frozenset(map_id_of_group[g] for g in {group_of[i] for i in exact} if g in map_id_of_group) for exact in yielded
+    ]
+    return built, yields

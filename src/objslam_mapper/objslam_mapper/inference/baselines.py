@@ -33,21 +33,19 @@ import logging
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from objslam_common.catalog import Catalog
 from objslam_common.records import ImageSlices, OdometrySample
 from objslam_mapper.config import GraphConfig, SamplerConfig
 from objslam_mapper.errors import MapperError
-from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem, build_problem
-from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import build_from_samples
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.diagnostics import PhaseProgress
+from objslam_mapper.inference.start import GreedyOptions, greedy_association, measurement_groups, no_association
 from objslam_mapper.inference.target import AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
 from objslam_mapper.map_file import BuiltMap
@@ -59,88 +57,6 @@ BASELINES = ("none", "greedy")
 
 class BaselineError(MapperError, ValueError):
     """An unknown baseline or groups that do not make a map."""
-
-
-@dataclass(frozen=True)
-class GreedyOptions:
-    gate_probability: float = 0.99  # chi-square gate of the Mahalanobis distance (2 dof)
-
-    @property
-    def gate_chi2(self) -> float:
-        # Chi-square with 2 dof has the closed-form quantile -2 ln(1 - p).
-        return -2.0 * math.log1p(-self.gate_probability)
-
-
-def no_association(tracklets: Sequence[Tracklet]) -> Association:
-    """Every tracklet its own object; nothing is clutter."""
-    return Association.of(range(len(tracklets)))
-
-
-def _measurement_groups(tracklets: Sequence[Tracklet], groups: Sequence[Sequence[int]]) -> list[NDArray[np.int64]]:
-    return [np.sort(np.concatenate([tracklets[t].measurement_indices for t in g])).astype(np.int64) for g in groups]
-
-
-def _mahalanobis2_xy(a_m: NDArray, a_cov: NDArray | None, b_m: NDArray, b_cov: NDArray | None) -> float:
-    if a_cov is None or b_cov is None:
-        return math.inf
-    cov = np.asarray(a_cov)[:2, :2] + np.asarray(b_cov)[:2, :2]
-    diff = np.asarray(a_m)[:2] - np.asarray(b_m)[:2]
-    if not (np.all(np.isfinite(cov)) and np.all(np.isfinite(diff))):
-        return math.inf
-    try:
-        return float(diff @ np.linalg.solve(cov, diff))
-    except np.linalg.LinAlgError:
-        return math.inf
-
-
-def greedy_association(
-    problem: GraphProblem,
-    tracklets: Sequence[Tracklet],
-    options: GreedyOptions | None = None,
-    progress: PhaseProgress | None = None,
-) -> Association:
-    """Greedy nearest-neighbour association with Mahalanobis gating (module docstring)."""
-    options = options or GreedyOptions()
-    gate = options.gate_chi2
-    report = progress or (lambda _phase, _done, _total: None)
-    order = sorted(range(len(tracklets)), key=lambda t: (tracklets[t].frame_indices[0], t))
-    groups: list[list[int]] = []
-    frames: list[set[int]] = []
-    warm: GraphSolution | None = None
-    for done, t in enumerate(order):
-        report("association", done, len(order))
-        tracklet = tracklets[t]
-        seen = set(tracklet.frame_indices)
-        candidates = [
-            j for j, g in enumerate(groups) if tracklets[g[0]].label == tracklet.label and not frames[j] & seen
-        ]
-        best = None
-        if candidates:
-            solution = solve_with_backend(
-                problem,
-                _measurement_groups(tracklets, [*groups, [t]]),
-                warm_start=warm,
-                with_covariances=True,
-            )
-            if solution.converged:
-                warm = solution
-                new = solution.objects[-1]
-                best_d2 = gate
-                for j in candidates:
-                    obj = solution.objects[j]
-                    d2 = _mahalanobis2_xy(new.location_m, new.location_cov, obj.location_m, obj.location_cov)
-                    if d2 <= best_d2:
-                        best, best_d2 = j, d2
-            else:
-                logger.warning("greedy: solve with tracklet %d did not converge; it stays a new object", t)
-        if best is None:
-            groups.append([t])
-            frames.append(set(seen))
-        else:
-            groups[best].append(t)
-            frames[best] |= seen
-    report("association", len(order), len(order))
-    return Association.from_groups(len(tracklets), groups)
 
 
 def map_of_groups(
@@ -186,7 +102,7 @@ def map_of_association(
     diagnostics: dict | None = None,
 ) -> BuiltMap:
     """The map of one association of ``tracklets`` (clutter tracklets left out)."""
-    return map_of_groups(problem, _measurement_groups(tracklets, state.groups), config, diagnostics)
+    return map_of_groups(problem, measurement_groups(tracklets, state.groups), config, diagnostics)
 
 
 def build_baseline_map(

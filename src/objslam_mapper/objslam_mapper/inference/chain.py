@@ -78,6 +78,8 @@ class ChainResult:
     best_log_target: float
     samples: int
     burn_in: int
+    log_targets: tuple[float, ...] = ()  # log target of each state of ``trace``
+    history: tuple[tuple[float, int], ...] = ()  # (log target, objects) after every step, burn-in included
 
     @property
     def acceptance_rates(self) -> dict[str, float]:
@@ -250,6 +252,8 @@ class MetropolisHastings:
         visited = {initial}
         counts: Counter[Association] = Counter()
         trace: list[Association] = []
+        log_targets: list[float] = []
+        history: list[tuple[float, int]] = []
         every = max(1, samples // 200)
         for step in range(samples):
             proposal = self.proposals.propose(view, rng)
@@ -269,15 +273,19 @@ class MetropolisHastings:
                         on_move(view.state)
                     if log_p > best_log_p:
                         best_state, best_log_p = view.state, log_p
+            history.append((log_p, view.state.n_objects))
             if step >= burn_in:
                 counts[view.state] += 1
                 if keep_trace:
                     trace.append(view.state)
+                    log_targets.append(log_p)
             if progress is not None and ((step + 1) % every == 0 or step + 1 == samples):
                 progress(step + 1, samples)
         return ChainResult(
             counts=dict(counts),
             trace=tuple(trace),
+            log_targets=tuple(log_targets),
+            history=tuple(history),
             moves=stats,
             distinct_visited=len(visited),
             target_evaluations=self.target.evaluations - evaluations_before,

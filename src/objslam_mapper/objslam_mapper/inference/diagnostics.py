@@ -1,22 +1,24 @@
 """What a map build reports about itself: the map file's ``diagnostics``.
 
 The algorithm does not keep its own books. A :class:`Stopwatch` is passed along: it times
-the phases, forwards progress, and holds the :class:`Work` that the target and the screen
-count their costly calls in; :func:`chain_diagnostics` and :func:`timings` turn what the
-steps returned into the reported entries, in the order the map file lists them.
+the phases and forwards progress; each chain has a :class:`Work` that its target and
+screen count their costly calls in; :func:`chains_diagnostics`, :func:`work_diagnostics`
+and :func:`timings` turn what the steps returned into the reported entries.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.problem import GraphProblem
-from objslam_mapper.inference.chain import ChainResult
 from objslam_mapper.inference.tracklets import TrackletResult
+
+if TYPE_CHECKING:
+    from objslam_mapper.inference.chains import ChainOutcome
 
 PhaseProgress = Callable[[str, int, int], None]  # phase ("tracklets", "sampling", "mapping"), done, total
 
@@ -76,37 +78,83 @@ def inputs_diagnostics(problem: GraphProblem, chained: TrackletResult, seed: int
     }
 
 
-def chain_diagnostics(start: Any, chain: ChainResult, work: Work) -> dict[str, Any]:
-    """The start state (:class:`~objslam_mapper.inference.start.StartState`), the chain and the solves."""
+def chains_diagnostics(outcomes: Sequence[ChainOutcome]) -> dict[str, Any]:
+    """The chains, pooled and one by one: starts, acceptance, states visited, best log target, objects."""
+    results = [o.result for o in outcomes]
+    proposed = sum(s.proposed for r in results for s in r.moves.values())
+    accepted = sum(s.accepted for r in results for s in r.moves.values())
     return {
-        "start_objects": start.first_objects,
-        **chain.diagnostics(),
-        "start_clutter_tracklets": start.clutter_tracklets,
-        "start_tracklets_cleared": len(start.cleared),
-        "start_tracklets_recalled": len(start.recalled),
-        "best_state_objects": chain.best_state.n_objects,
-        "best_state_clutter_tracklets": len(chain.best_state.clutter),
-        "solves": work.solves,
-        "screens": work.screens,
-        "object_solves": work.object_solves,
-        "clutter_solves": work.clutter_solves,
+        "chains": len(outcomes),
+        "samples": results[0].samples,
+        "burn_in": results[0].burn_in,
+        "kept_samples": sum(sum(r.counts.values()) for r in results),
+        "acceptance_rate": round(accepted / proposed, 4) if proposed else 0.0,
+        "best_log_target": max(float(r.best_log_target) for r in results),
+        "chain_runs": [_chain_run(o) for o in outcomes],
     }
 
 
-def timings(watch: Stopwatch) -> dict[str, float]:
-    """Phases that add up to the total; the chain's solves are timed where they happen (a screen
-    may need its reference state's solve, counted under solves)."""
-    work = watch.work
-    tracklets, sampling, mapping = (watch.seconds(p) for p in ("tracklets", "sampling", "mapping"))
+def _chain_run(outcome: ChainOutcome) -> dict[str, Any]:
+    result, start, work = outcome.result, outcome.start, outcome.work
+    kept_objects = [state.n_objects for state in result.trace] or [result.final_state.n_objects]
     return {
-        "tracklets": round(tracklets, 3),
-        "sampling": round(sampling, 3),
-        "solving_during_sampling": round(work.solve_seconds, 3),
-        "screening": round(work.screen_seconds, 3),
-        "clutter_solves": round(work.clutter_seconds, 3),
-        "proposals_and_chain": round(sampling - work.solve_seconds - work.screen_seconds - work.clutter_seconds, 3),
-        "mapping": round(mapping, 3),
-        "marginals": round(work.marginal_seconds, 3),
-        "map_building": round(mapping - work.marginal_seconds, 3),
+        "chain": outcome.spec.index,
+        "start": outcome.spec.start,
+        "start_objects": start.first_objects,
+        "start_clutter_tracklets": start.clutter_tracklets,
+        "start_tracklets_cleared": len(start.cleared),
+        "start_tracklets_recalled": len(start.recalled),
+        **result.diagnostics(),
+        "best_state_objects": result.best_state.n_objects,
+        "best_state_clutter_tracklets": len(result.best_state.clutter),
+        "kept_objects_mean": round(sum(kept_objects) / len(kept_objects), 3),
+        "solves": work.solves,
+        "screens": work.screens,
+        "trace": _thinned(result.history),
+    }
+
+
+TRACE_POINTS = 300  # per chain, in the map file: enough for a picture
+
+
+def _thinned(history: Sequence[tuple[float, int]]) -> dict[str, Any]:
+    """Every k-th step's (log target, objects), burn-in included, k so that about TRACE_POINTS remain."""
+    every = max(1, -(-len(history) // TRACE_POINTS))
+    kept = history[every - 1 :: every]
+    return {
+        "every_steps": every,
+        "log_target": [round(float(v), 2) for v, _ in kept],
+        "objects": [int(n) for _, n in kept],
+    }
+
+
+def work_diagnostics(outcomes: Sequence[ChainOutcome]) -> dict[str, int]:
+    """The costly calls of all chains."""
+    fields = ("solves", "screens", "object_solves", "clutter_solves", "marginal_solves")
+    return {name: sum(getattr(o.work, name) for o in outcomes) for name in fields}
+
+
+def timings(watch: Stopwatch, outcomes: Sequence[ChainOutcome]) -> dict[str, Any]:
+    """Wall seconds of the phases (``tracklets + sampling + mapping == total``), and where the
+    chains' seconds went, summed over the chains (so more than the sampling's wall time when
+    they run in parallel): graph solves, screens, clutter solves, the kept states' marginals,
+    and the rest (proposals and chain bookkeeping)."""
+    work = [o.work for o in outcomes]
+    spent = {
+        "solving_during_sampling": sum(w.solve_seconds for w in work),
+        "screening": sum(w.screen_seconds for w in work),
+        "clutter_solves": sum(w.clutter_seconds for w in work),
+        "marginals": sum(w.marginal_seconds for w in work),
+    }
+    chains = sum(o.seconds for o in outcomes)
+    return {
+        "tracklets": round(watch.seconds("tracklets"), 3),
+        "sampling": round(watch.seconds("sampling"), 3),
+        "mapping": round(watch.seconds("mapping"), 3),
         "total": round(watch.ends["mapping"] - watch.started, 3),
+        "chains": round(chains, 3),
+        "chain_seconds": [round(o.seconds, 3) for o in outcomes],
+        **{name: round(seconds, 3) for name, seconds in spent.items()},
+        "proposals_and_chain": round(chains - sum(spent.values()), 3),
+        "map_building": round(watch.seconds("mapping"), 3),
     }

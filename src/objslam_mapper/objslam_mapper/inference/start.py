@@ -16,16 +16,26 @@ Only the start state changes: the target, and so the chain's exactness, do not.
 
 from __future__ import annotations
 
+import dataclasses
+import logging
+import math
 from collections.abc import Collection, Sequence
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from objslam_mapper.config import SamplerConfig
+from objslam_mapper.graph.backends import solve_with_backend
+from objslam_mapper.graph.problem import GraphProblem
+from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.association import CLUTTER, Association
+from objslam_mapper.inference.diagnostics import PhaseProgress
 from objslam_mapper.inference.screen import ProposalScreen
 from objslam_mapper.inference.tracklets import Tracklet
+
+logger = logging.getLogger(__name__)
 
 
 def centroid(tracklets: Sequence[Tracklet], group: Sequence[int]) -> NDArray[np.float64]:
@@ -164,6 +174,98 @@ def recall_start_clutter(
     return state, sorted(moved)
 
 
+@dataclass(frozen=True)
+class GreedyOptions:
+    gate_probability: float = 0.99  # chi-square gate of the Mahalanobis distance (2 dof)
+
+    @property
+    def gate_chi2(self) -> float:
+        # Chi-square with 2 dof has the closed-form quantile -2 ln(1 - p).
+        return -2.0 * math.log1p(-self.gate_probability)
+
+
+def measurement_groups(tracklets: Sequence[Tracklet], groups: Sequence[Sequence[int]]) -> list[NDArray[np.int64]]:
+    """Each group's measurement indices (its tracklets' slices), sorted."""
+    return [np.sort(np.concatenate([tracklets[t].measurement_indices for t in g])).astype(np.int64) for g in groups]
+
+
+def no_association(tracklets: Sequence[Tracklet]) -> Association:
+    """Every tracklet its own object; nothing is clutter."""
+    return Association.of(range(len(tracklets)))
+
+
+def _mahalanobis2_xy(a_m: NDArray, a_cov: NDArray | None, b_m: NDArray, b_cov: NDArray | None) -> float:
+    if a_cov is None or b_cov is None:
+        return math.inf
+    cov = np.asarray(a_cov)[:2, :2] + np.asarray(b_cov)[:2, :2]
+    diff = np.asarray(a_m)[:2] - np.asarray(b_m)[:2]
+    if not (np.all(np.isfinite(cov)) and np.all(np.isfinite(diff))):
+        return math.inf
+    try:
+        return float(diff @ np.linalg.solve(cov, diff))
+    except np.linalg.LinAlgError:
+        return math.inf
+
+
+def greedy_association(
+    problem: GraphProblem,
+    tracklets: Sequence[Tracklet],
+    options: GreedyOptions | None = None,
+    progress: PhaseProgress | None = None,
+) -> Association:
+    """Greedy nearest-neighbour association with Mahalanobis gating (module docstring)."""
+    options = options or GreedyOptions()
+    gate = options.gate_chi2
+    # The decisions read the posterior marginals only: the error covariances would cost a dense
+    # inverse per tracklet (minutes on a 900-pose bag) and change nothing here.
+    solver = problem.solver
+    problem = dataclasses.replace(
+        problem,
+        solver=dataclasses.replace(
+            solver, error_covariance=dataclasses.replace(solver.error_covariance, enabled=False)
+        ),
+    )
+    report = progress or (lambda _phase, _done, _total: None)
+    order = sorted(range(len(tracklets)), key=lambda t: (tracklets[t].frame_indices[0], t))
+    groups: list[list[int]] = []
+    frames: list[set[int]] = []
+    warm: GraphSolution | None = None
+    for done, t in enumerate(order):
+        report("association", done, len(order))
+        tracklet = tracklets[t]
+        seen = set(tracklet.frame_indices)
+        candidates = [
+            j for j, g in enumerate(groups) if tracklets[g[0]].label == tracklet.label and not frames[j] & seen
+        ]
+        best = None
+        if candidates:
+            solution = solve_with_backend(
+                problem,
+                measurement_groups(tracklets, [*groups, [t]]),
+                warm_start=warm,
+                with_covariances=True,
+            )
+            if solution.converged:
+                warm = solution
+                new = solution.objects[-1]
+                best_d2 = gate
+                for j in candidates:
+                    obj = solution.objects[j]
+                    d2 = _mahalanobis2_xy(new.location_m, new.location_cov, obj.location_m, obj.location_cov)
+                    if d2 <= best_d2:
+                        best, best_d2 = j, d2
+            else:
+                logger.warning("greedy: solve with tracklet %d did not converge; it stays a new object", t)
+        if best is None:
+            groups.append([t])
+            frames.append(set(seen))
+        else:
+            groups[best].append(t)
+            frames[best] |= seen
+    report("association", len(order), len(order))
+    return Association.from_groups(len(tracklets), groups)
+
+
 class StartState(NamedTuple):
     """The start of the chain and how it was reached."""
 
@@ -192,3 +294,56 @@ def start_state(screen: ProposalScreen, config: SamplerConfig) -> StartState:
             state, more = clear_start_objects(screen, state)
             cleared += more
     return StartState(state, first_objects, len(in_clutter), cleared, recalled)
+
+
+def random_association(tracklets: Sequence[Tracklet], rng: np.random.Generator, allow_clutter: bool) -> Association:
+    """A random association: tracklets in random order, each to clutter (one in five, when
+    allowed), into a random object of its class not seen in its images (half of the rest), or
+    a new object."""
+    members: list[list[int]] = []
+    labels: list[str] = []
+    frames: list[set[int]] = []
+    assignment = [CLUTTER] * len(tracklets)
+    for t in rng.permutation(len(tracklets)):
+        tracklet = tracklets[int(t)]
+        seen = set(tracklet.frame_indices)
+        draw = rng.random()
+        if allow_clutter and draw < 0.2:
+            continue
+        free = [
+            j
+            for j, (label, images) in enumerate(zip(labels, frames, strict=True))
+            if label == tracklet.label and not images & seen
+        ]
+        if free and draw < 0.6:
+            j = free[int(rng.integers(len(free)))]
+        else:
+            j = len(members)
+            members.append([])
+            labels.append(tracklet.label)
+            frames.append(set())
+        members[j].append(int(t))
+        frames[j] |= seen
+        assignment[int(t)] = j
+    return Association.of(assignment)
+
+
+def dispersed_start(kind: str, screen: ProposalScreen, config: SamplerConfig, rng: np.random.Generator) -> StartState:
+    """The start of a chain of the given kind (``sampler.starts``): far apart on purpose, so that
+    chains which agree in the end say more than one chain from a good guess."""
+    target = screen.target
+    tracklets = target.tracklets
+    clutter = config.clutter.enabled
+    if kind == "heuristic":
+        return start_state(screen, config)
+    if kind == "singletons":
+        state = no_association(tracklets)
+    elif kind == "greedy":
+        state = greedy_association(target.problem, tracklets)
+    elif kind == "clutter":
+        state = Association.of([CLUTTER] * len(tracklets)) if clutter else no_association(tracklets)
+    elif kind == "random":
+        state = random_association(tracklets, rng, clutter)
+    else:
+        raise ValueError(f"unknown chain start {kind!r}")
+    return StartState(state, state.n_objects, len(state.clutter), [], [])

@@ -78,6 +78,7 @@ def _map_object(obj: MappedObject) -> MapObject:
         position_covariance=[float(v) for row in obj.position_covariance for v in row],
         size_covariance=[float(v) for row in obj.size_covariance for v in row],
         measurement_count=int(obj.measurement_count),
+        existence_probability_by_chain=[float(p) for p in obj.existence_by_chain],
     )
 
 
@@ -89,4 +90,17 @@ def to_object_map(built: BuiltMap, stamp: Time) -> ObjectMap:
         rejected=[_map_object(o) for o in built.rejected],
         samples=int(diagnostics.get("samples", 0)),
         burn_in=int(diagnostics.get("burn_in", 0)),
+        **dict(zip(("chains", "converged", "rhat_max"), chain_agreement(built), strict=True)),
+    )
+
+
+def chain_agreement(built: BuiltMap) -> tuple[int, bool, float]:
+    """(chains, converged, largest R-hat) of a map, as the messages carry them: not converged
+    and R-hat 0 with one chain, whose convergence cannot be judged."""
+    convergence = built.diagnostics.get("convergence") or {}
+    rhat = convergence.get("rhat_max")
+    return (
+        int(convergence.get("chains", built.diagnostics.get("chains", 1))),
+        bool(convergence.get("converged")),
+        float(rhat) if rhat is not None else 0.0,
     )

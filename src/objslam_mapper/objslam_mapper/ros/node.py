@@ -37,9 +37,11 @@ from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
 from objslam_mapper.config import MapperConfig
+from objslam_mapper.inference.chains import ChainRunner
 from objslam_mapper.map_file import BuiltMap, MapFileError, write_map
+from objslam_mapper.parallel import RayRunner, chain_runner
 from objslam_mapper.pipeline import build_map
-from objslam_mapper.ros.map_messages import to_marker_array, to_object_map, to_path
+from objslam_mapper.ros.map_messages import chain_agreement, to_marker_array, to_object_map, to_path
 from objslam_msgs.msg import BuildProgress, ObjectMap, SliceArray
 from objslam_msgs.srv import BuildMap
 
@@ -67,6 +69,7 @@ class MapperNode(Node):
         self._build_started = 0.0
         self._last_warned: dict[str, float] = {}
         self._last_progress = 0.0
+        self._ray_runner: RayRunner | None = None
 
         inputs = MutuallyExclusiveCallbackGroup()
         deep = QoSProfile(depth=ros.subscription_depth, reliability=ReliabilityPolicy.RELIABLE)
@@ -174,6 +177,7 @@ class MapperNode(Node):
             samples=request.samples or sampler.samples,
             burn_in=request.burn_in or sampler.burn_in,
             seed=request.seed or sampler.seed,
+            chains=request.chains or sampler.chains,
         )
         return dataclasses.replace(self.config, sampler=sampler)
 
@@ -203,10 +207,12 @@ class MapperNode(Node):
         sampler = config.sampler
         self.get_logger().info(
             f"building from {len(odometry)} odometry messages and {len(images)} slice arrays "
-            f"({sampler.samples} samples, burn-in {sampler.burn_in}, seed {sampler.seed})"
+            f"({sampler.chains} chains of {sampler.samples} samples, burn-in {sampler.burn_in}, seed {sampler.seed})"
         )
         try:
-            built = build_map(odometry, images, config, self.catalog, progress=self._progress)
+            built = build_map(
+                odometry, images, config, self.catalog, progress=self._progress, runner=self._runner(config)
+            )
             built = dataclasses.replace(
                 built, diagnostics={**built.diagnostics, "dropped_messages": counters.dropped(), **vars(counters)}
             )
@@ -220,9 +226,11 @@ class MapperNode(Node):
         self._progress("done", 1, 1)
         response.success = True
         response.object_count = len(built.objects)
+        response.chains, response.converged, response.rhat_max = chain_agreement(built)
         dropped = counters.dropped()
         response.message = (
             f"built a map of {len(built.objects)} objects ({len(built.rejected)} rejected) from {len(images)} images"
+            + _agreement(response)
             + (
                 f"; {dropped} messages were dropped before the build ({counters.describe()})"
                 if dropped
@@ -281,10 +289,31 @@ class MapperNode(Node):
         self.get_logger().info(f"map written to {path}")
         return ""
 
+    def _runner(self, config: MapperConfig) -> ChainRunner:
+        """The chains' runner of a build; a Ray runner is kept for the next builds (its Ray stays up)."""
+        runner = chain_runner(config.parallel, config.sampler.chains)
+        if isinstance(runner, RayRunner):
+            if self._ray_runner is None:
+                self._ray_runner = runner
+            return self._ray_runner
+        return runner
+
+    def destroy_node(self) -> None:
+        if self._ray_runner is not None:
+            self._ray_runner.close()
+        super().destroy_node()
+
     def summary(self) -> str:
         c = self.buffer.counters
         buffered = f"buffered {len(self.buffer.odometry)} odometry, {len(self.buffer.images)} slice arrays"
         return f"{buffered}; dropped {c.dropped()}"
+
+
+def _agreement(response: BuildMap.Response) -> str:
+    if response.chains < 2:
+        return "; one chain (its convergence cannot be judged)"
+    verdict = "converged" if response.converged else "NOT converged"
+    return f"; {response.chains} chains, {verdict} (R-hat max {response.rhat_max:.3f})"
 
 
 def _reason(exc: Exception) -> str:

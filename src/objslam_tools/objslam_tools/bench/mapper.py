@@ -49,6 +49,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples", type=int, default=6000, help="MH samples incl. burn-in (default 6000)")
     parser.add_argument("--burn-in", type=int, default=2500, help="burn-in samples (default 2500)")
     parser.add_argument("--seed", type=int, default=None, help="chain seed (default from the parameters)")
+    parser.add_argument(
+        "--chains",
+        type=int,
+        default=1,
+        help="chains, one after another in this process (default 1: the cost of a chain; "
+        "objslam bench chains times several in parallel)",
+    )
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
     parser.add_argument(
         "--naive-seconds", type=float, default=30.0, help="time budget of the naive GTSAM baseline (default 30 s)"
@@ -76,7 +83,7 @@ def _config(args: argparse.Namespace, samples: int, burn_in: int) -> Any:
     from objslam_mapper.config import MapperConfig
 
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
-    overrides: dict[str, int] = {"samples": samples, "burn_in": burn_in}
+    overrides: dict[str, int] = {"samples": samples, "burn_in": burn_in, "chains": args.chains}
     if args.seed is not None:
         overrides["seed"] = args.seed
     return dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, **overrides))
@@ -249,6 +256,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.samples < 1 or not 0 <= args.burn_in < args.samples:
         raise UserError("need --samples >= 1 and 0 <= --burn-in < --samples")
+    if args.chains < 1:
+        raise UserError("--chains must be at least 1")
     if args.scaling_samples is not None and args.scaling_samples < 2:
         raise UserError("--scaling-samples must be at least 2")
     bag = Path(args.bag)
@@ -278,7 +287,7 @@ def run(args: argparse.Namespace) -> int:
         "object_solves": diag.get("object_solves"),
         "clutter_solves": diag.get("clutter_solves"),
         "marginal_solves": diag.get("marginal_solves"),
-        "distinct_associations_visited": diag.get("distinct_associations_visited"),
+        "distinct_associations_visited": sum(c["distinct_associations_visited"] for c in diag.get("chain_runs", [])),
         "acceptance_rate": diag.get("acceptance_rate"),
         "objects": len(built.objects),
         "rejected": len(built.rejected),

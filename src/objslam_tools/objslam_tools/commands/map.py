@@ -24,6 +24,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--samples", type=int, default=None, help="MCMC samples incl. burn-in (default 6000)")
     parser.add_argument("--burn-in", type=int, default=None, help="samples discarded first (default 2500)")
     parser.add_argument("--seed", type=int, default=None, help="random seed (default from the parameters)")
+    parser.add_argument(
+        "--chains", type=int, default=None, help="Metropolis-Hastings chains from dispersed starts (default 4)"
+    )
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        default=None,
+        help="run the chains on this Ray cluster (default: parallel.ray_address, RAY_ADDRESS, else a local Ray)",
+    )
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
     parser.add_argument("--detector-params", metavar="FILE", default=None, help="detector parameters")
     parser.add_argument("--figures", metavar="DIR", default=None, help="also write the pictures here")
@@ -46,24 +55,24 @@ def run(args: argparse.Namespace) -> int:
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
+    from objslam_mapper.parallel import chain_runner
     from objslam_tools.bag import open_bag
     from objslam_tools.errors import UserError
-    from objslam_tools.mapping import bag_inputs, build_association_map, oracle_truth
+    from objslam_tools.mapping import bag_inputs, build_association_map, convergence_line, oracle_truth
     from objslam_tools.progress import StderrProgress
 
-    for name in ("samples", "burn_in", "seed"):
+    for name in ("samples", "burn_in", "seed", "chains"):
         value = getattr(args, name)
-        if value is not None and value < (1 if name == "samples" else 0):
-            raise UserError(f"--{name.replace('_', '-')} must be {'>= 1' if name == 'samples' else '>= 0'}")
+        if value is not None and value < (1 if name in ("samples", "chains") else 0):
+            raise UserError(f"--{name.replace('_', '-')} must be {'>= 0' if name in ('burn_in', 'seed') else '>= 1'}")
     out = Path(args.out)
     if out.is_dir():
         raise UserError(f"--out {out} is a directory; give the map file's path")
     bag = open_bag(args.bag)
     params = args.params or default_config_dir() / "mapper.yaml"
     config = load_config(MapperConfig, params, "mapper")
-    overrides = {
-        k: v for k, v in (("samples", args.samples), ("burn_in", args.burn_in), ("seed", args.seed)) if v is not None
-    }
+    given = (("samples", args.samples), ("burn_in", args.burn_in), ("seed", args.seed), ("chains", args.chains))
+    overrides = {k: v for k, v in given if v is not None}
     config = dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, **overrides))
     if config.sampler.burn_in >= config.sampler.samples:
         raise UserError(f"--burn-in ({config.sampler.burn_in}) must be below --samples ({config.sampler.samples})")
@@ -80,18 +89,32 @@ def run(args: argparse.Namespace) -> int:
         elif phase == "association":
             associating(done, total)
 
-    built = build_association_map(inputs, args.association, config, catalog, truth=truth, progress=progress)
+    runner = chain_runner(config.parallel, config.sampler.chains, args.ray) if args.association == "sampler" else None
+    try:
+        built = build_association_map(
+            inputs, args.association, config, catalog, truth=truth, progress=progress, runner=runner
+        )
+    finally:
+        close = getattr(runner, "close", None)
+        if close is not None:
+            close()
     write_map(out, built)
     elapsed = built.diagnostics["wall_time_s"]
     print(
         f"map ({args.association}): {len(built.objects)} objects ({len(built.rejected)} rejected) "
         f"from {len(inputs.images)} images and {len(inputs.odometry)} odometry messages in {elapsed:.1f} s -> {out}"
     )
+    convergence = built.diagnostics.get("convergence")
+    if convergence:
+        print(convergence_line(convergence))
     for obj in built.objects:
         x, y, z = obj.position_m
+        by_chain = " ".join(f"{p:.2f}" for p in obj.existence_by_chain) if len(obj.existence_by_chain) > 1 else ""
         print(
             f"  #{obj.id:<3} {obj.label:<7} x {x:7.2f}  y {y:7.2f}  z {z:5.2f}  d {obj.size_m[0]:.2f}  "
-            f"h {obj.size_m[1]:.2f}  P {obj.existence_probability:.2f}  n {obj.measurement_count}"
+            f"h {obj.size_m[1]:.2f}  P {obj.existence_probability:.2f}"
+            + (f" [{by_chain}]" if by_chain else "")
+            + f"  n {obj.measurement_count}"
         )
     if args.figures:
         from objslam_tools.figures import write_figures

@@ -1,0 +1,128 @@
+"""Several chains from dispersed starts: seeds, starts, pooling, and the map they agree on."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from objslam_mapper.config import DetectionConfig, SamplerConfig
+from objslam_mapper.inference.algorithm1 import build_from_samples
+from objslam_mapper.inference.association import CLUTTER
+from objslam_mapper.inference.chains import ChainSpec, InProcess, chain_specs, run_chain_task
+from objslam_mapper.inference.infer import finish, infer_map, prepare
+from objslam_mapper.inference.screen import ProposalScreen
+from objslam_mapper.inference.start import dispersed_start, greedy_association, start_state
+from objslam_mapper.inference.target import AssociationTarget, TargetOptions
+from objslam_mapper.inference.tracklets import tracklets_of_problem
+from tests.objslam_mapper.association_scenes import problem_of, simulate
+
+CHAINS = SamplerConfig(samples=300, burn_in=100, chains=3, detection=DetectionConfig(max_range_m=3.5))
+
+
+@pytest.fixture(scope="module")
+def problem():
+    return problem_of(simulate())
+
+
+@pytest.fixture(scope="module")
+def built(problem):
+    return infer_map(problem, CHAINS)
+
+
+def _without_timings(built):
+    return dataclasses.replace(built, diagnostics={k: v for k, v in built.diagnostics.items() if k != "timings_s"})
+
+
+def test_chain_specs_take_the_starts_in_turn_then_random_ones():
+    config = dataclasses.replace(CHAINS, chains=6, seed=7)
+    specs = chain_specs(config)
+    assert [s.start for s in specs] == ["heuristic", "singletons", "greedy", "clutter", "random", "random"]
+    assert [s.index for s in specs] == list(range(6)) and {s.seed for s in specs} == {7}
+
+
+def test_each_chain_draws_its_own_stream_and_chain_0_the_seeds_own():
+    draws = [ChainSpec(k, "random", 5).chain_rng().random(4) for k in range(3)]
+    assert np.array_equal(draws[0], np.random.default_rng(5).random(4))  # one chain: the single-chain map
+    assert not np.allclose(draws[1], draws[2]) and not np.allclose(draws[0], draws[1])
+    assert np.array_equal(ChainSpec(2, "random", 5).chain_rng().random(4), draws[2])  # reproducible
+    assert not np.allclose(ChainSpec(2, "random", 5).start_rng().random(4), draws[2])  # start apart from chain
+
+
+def test_the_same_seed_gives_the_same_map_and_chains(problem, built):
+    again = infer_map(problem, CHAINS)
+    assert _without_timings(again) == _without_timings(built)
+    other = infer_map(problem, dataclasses.replace(CHAINS, seed=2))
+    traces = [[run["trace"]["log_target"] for run in b.diagnostics["chain_runs"]] for b in (built, other)]
+    assert traces[0] != traces[1]
+
+
+def test_one_chain_of_several_is_the_chain_of_a_one_chain_run(problem, built):
+    alone = infer_map(problem, dataclasses.replace(CHAINS, chains=1))
+    assert alone.diagnostics["chain_runs"][0] == built.diagnostics["chain_runs"][0]
+
+
+def test_the_starts_are_dispersed(problem):
+    chained = tracklets_of_problem(problem, CHAINS.tracklets)
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions.of(CHAINS))
+    screen = ProposalScreen(target)
+    rng = np.random.default_rng(0)
+    starts = {kind: dispersed_start(kind, screen, CHAINS, rng).state for kind in CHAINS.starts}
+    assert starts["heuristic"] == start_state(screen, CHAINS).state
+    assert starts["singletons"].n_objects == len(chained.tracklets) and not starts["singletons"].clutter
+    assert starts["greedy"] == greedy_association(problem, chained.tracklets)
+    assert starts["clutter"].assignment == (CLUTTER,) * len(chained.tracklets)
+    assert len(set(starts.values())) == len(starts)
+    randoms = {dispersed_start("random", screen, CHAINS, rng).state for _ in range(5)}
+    assert len(randoms) > 1
+    with pytest.raises(ValueError, match="unknown chain start"):
+        dispersed_start("best", screen, CHAINS, rng)
+
+
+def test_the_map_is_algorithm_1_over_the_pooled_samples_of_all_chains(problem, built):
+    inference = prepare(problem, CHAINS)
+    outcomes = InProcess().run(inference.tasks)
+    assert [o.spec for o in outcomes] == chain_specs(CHAINS)
+    pooled = build_from_samples(
+        [sample for outcome in outcomes for sample in outcome.samples],
+        problem.stamps_ns,
+        spurious_location_stddev_m=CHAINS.spurious_location_stddev_m,
+        existence_threshold=CHAINS.existence_threshold,
+        report_min_fraction=CHAINS.report_min_fraction,
+        identity_overlap=CHAINS.identity_overlap,
+    )
+    mapped = finish(inference, outcomes)
+    plain = [dataclasses.replace(o, existence_by_chain=()) for o in (*mapped.objects, *mapped.rejected)]
+    assert plain == [*pooled.objects, *pooled.rejected]
+    assert mapped.trajectory == pooled.trajectory
+    kept = CHAINS.samples - CHAINS.burn_in
+    assert mapped.diagnostics["kept_samples"] == pooled.diagnostics["map_samples"] == CHAINS.chains * kept
+    # Each identity's pooled probability is the mean of its per-chain ones (equal kept draws per chain).
+    for obj in (*mapped.objects, *mapped.rejected):
+        assert len(obj.existence_by_chain) == CHAINS.chains
+        assert obj.existence_probability == pytest.approx(np.mean(obj.existence_by_chain), abs=1e-9)
+
+
+def test_the_map_file_records_each_chain(built):
+    runs = built.diagnostics["chain_runs"]
+    assert [r["start"] for r in runs] == ["heuristic", "singletons", "greedy"]
+    for run in runs:
+        for key in ("acceptance_rates", "distinct_associations_visited", "best_log_target", "kept_objects_mean"):
+            assert key in run
+        assert len(run["trace"]["log_target"]) == len(run["trace"]["objects"]) <= 300
+        assert run["trace"]["every_steps"] * len(run["trace"]["objects"]) <= CHAINS.samples
+    assert built.diagnostics["best_log_target"] == max(r["best_log_target"] for r in runs)
+    convergence = built.diagnostics["convergence"]
+    assert convergence["chains"] == 3 and convergence["draws_per_chain"] == CHAINS.samples - CHAINS.burn_in
+    assert isinstance(convergence["converged"], bool)
+    names = set(convergence["quantities"])
+    assert {"log_target", "objects"} <= names
+    assert {f"identity_{o.id}" for o in (*built.objects, *built.rejected)} <= names
+
+
+def test_a_chain_task_is_a_pure_function_of_its_task(problem):
+    inference = prepare(problem, CHAINS)
+    first, second = (run_chain_task(inference.tasks[1]) for _ in range(2))
+    assert first.result.counts == second.result.counts and first.start == second.start
+    assert first.result.log_targets == second.result.log_targets

@@ -1,0 +1,172 @@
+"""The chains' agreement: R-hat and bulk ESS against the paper's formulas, and the verdict.
+
+The reference below is written from Vehtari, Gelman, Simpson, Carpenter and Bürkner (2021),
+"Rank-normalization, folding, and localization: an improved R-hat", sections 3-4 and
+appendix A, independently of ArviZ (which :mod:`objslam_mapper.inference.convergence` calls).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.special import ndtri
+from scipy.stats import rankdata
+
+from objslam_mapper.inference.convergence import chain_convergence, rhat_and_ess
+
+
+def _split(draws: np.ndarray) -> np.ndarray:
+    half = draws.shape[1] // 2
+    return np.vstack([draws[:, :half], draws[:, -half:]])
+
+
+def _rank_normalized(draws: np.ndarray) -> np.ndarray:
+    ranks = rankdata(draws, method="average").reshape(draws.shape)
+    return ndtri((ranks - 0.375) / (draws.size + 0.25))
+
+
+def _basic_rhat(chains: np.ndarray) -> float:
+    n = chains.shape[1]
+    within = chains.var(axis=1, ddof=1).mean()
+    between = n * chains.mean(axis=1).var(ddof=1)
+    return float(np.sqrt(((n - 1) / n * within + between / n) / within))
+
+
+def _ess(chains: np.ndarray) -> float:
+    """Geyer's initial monotone sequence over chains, as Stan computes it (paper eqs. 10-11,
+    appendix A): paired autocorrelations summed while positive, made monotone, and the first
+    positive even-lag term past the cut added once."""
+    m, n = chains.shape
+    centred = chains - chains.mean(axis=1, keepdims=True)
+    autocov = np.array([[np.dot(c[: n - t], c[t:]) / n for t in range(n)] for c in centred])
+    within = autocov[:, 0].mean() * n / (n - 1)
+    var_plus = within * (n - 1) / n + chains.mean(axis=1).var(ddof=1)
+    rho = 1.0 - (within - autocov.mean(axis=0)) / var_plus
+    kept = np.zeros(n)
+    kept[0], kept[1] = 1.0, rho[1]
+    even, odd, t = 1.0, rho[1], 1
+    while t < n - 3 and even + odd > 0:
+        even, odd = rho[t + 1], rho[t + 2]
+        if even + odd >= 0:
+            kept[t + 1], kept[t + 2] = even, odd
+        t += 2
+    last = t - 2
+    if even > 0:
+        kept[last + 1] = even
+    for t in range(1, last - 1, 2):
+        if kept[t + 1] + kept[t + 2] > kept[t - 1] + kept[t]:
+            kept[t + 1] = kept[t + 2] = (kept[t - 1] + kept[t]) / 2
+    tau = -1.0 + 2.0 * kept[: last + 1].sum() + kept[last + 1]
+    return float(m * n / max(tau, 1.0 / np.log10(m * n)))
+
+
+def reference_rhat(draws: np.ndarray) -> float:
+    split = _split(draws)
+    folded = np.abs(split - np.median(split))
+    return max(_basic_rhat(_rank_normalized(split)), _basic_rhat(_rank_normalized(folded)))
+
+
+def reference_bulk_ess(draws: np.ndarray) -> float:
+    return _ess(_rank_normalized(_split(draws)))
+
+
+def ar1_chains(rng, chains: int, draws: int, phi: float, offsets) -> np.ndarray:
+    noise = rng.normal(size=(chains, draws))
+    out = np.empty_like(noise)
+    out[:, 0] = noise[:, 0]
+    for t in range(1, draws):
+        out[:, t] = phi * out[:, t - 1] + np.sqrt(1 - phi**2) * noise[:, t]
+    return out + np.asarray(offsets, dtype=float)[:, None]
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    chains=st.integers(2, 5),
+    draws=st.integers(40, 400),
+    phi=st.floats(0.0, 0.95),
+    shift=st.floats(0.0, 2.0),
+)
+def test_rhat_and_bulk_ess_match_the_papers_formulas(seed, chains, draws, phi, shift):
+    rng = np.random.default_rng(seed)
+    offsets = np.zeros(chains)
+    offsets[0] = shift  # one chain apart from the others: R-hat must see it
+    draws_array = ar1_chains(rng, chains, draws, phi, offsets)
+    got = rhat_and_ess(draws_array)
+    assert got.rhat == pytest.approx(reference_rhat(draws_array), rel=1e-9)
+    assert got.ess_bulk == pytest.approx(reference_bulk_ess(draws_array), rel=1e-9)
+
+
+def test_chains_from_one_distribution_agree_and_chains_apart_do_not():
+    rng = np.random.default_rng(0)
+    same = rhat_and_ess(ar1_chains(rng, 4, 1000, 0.5, [0, 0, 0, 0]))
+    assert same.rhat < 1.01 and 1000 < same.ess_bulk < 4000  # AR(1), phi 0.5: about a third of the draws
+    apart = rhat_and_ess(ar1_chains(rng, 4, 1000, 0.5, [0, 0, 0, 1]))
+    assert apart.rhat > 1.05 and apart.ess_bulk < 100  # one chain a stddev off: far past 1.01
+
+
+def test_indicators_that_never_change_count_as_agreeing_or_as_apart():
+    assert rhat_and_ess(np.ones((3, 50))).rhat == 1.0  # the same everywhere: the chains agree exactly
+    stuck = np.vstack([np.ones(50), np.ones(50), np.zeros(50)])  # each chain constant, one apart
+    assert rhat_and_ess(stuck).rhat == float("inf")
+
+
+class _Result:
+    def __init__(self, trace, log_targets):
+        self.trace = tuple(trace)
+        self.log_targets = tuple(log_targets)
+        self.counts = {state: self.trace.count(state) for state in dict.fromkeys(self.trace)}
+
+
+class _Outcome:
+    def __init__(self, trace, log_targets):
+        self.result = _Result(trace, log_targets)
+
+
+class _State:
+    def __init__(self, name, n_objects):
+        self.name, self.n_objects = name, n_objects
+
+    def __hash__(self):
+        return hash(self.name)
+
+    def __eq__(self, other):
+        return self.name == other.name
+
+
+A, B = _State("a", 2), _State("b", 3)
+
+
+def _yields(outcomes, of_state):
+    return [of_state[state.name] for outcome in outcomes for state in outcome.result.counts]
+
+
+def test_chains_that_mix_between_two_states_converge():
+    rng = np.random.default_rng(1)
+    outcomes = []
+    for _ in range(3):
+        trace = [A if x else B for x in rng.random(400) < 0.7]
+        # Each chain solved the states from its own warm start: a few 1e-9 nats apart.
+        outcomes.append(_Outcome(trace, [(10.0 if s is A else 9.0) + 1e-9 * rng.random() for s in trace]))
+    got = chain_convergence(outcomes, _yields(outcomes, {"a": frozenset({0}), "b": frozenset({0, 1})}), [0, 1], 1.01)
+    assert got.converged, got.disagreements
+    assert got.existence_by_chain[0] == (1.0, 1.0, 1.0)
+    assert all(abs(p - 0.3) < 0.1 for p in got.existence_by_chain[1])
+    assert set(got.quantities) == {"log_target", "objects", "identity_0", "identity_1"}
+
+
+def test_a_chain_stuck_in_another_state_is_named():
+    outcomes = [_Outcome([A] * 200, [10.0] * 200), _Outcome([A] * 200, [10.0] * 200), _Outcome([B] * 200, [9.0] * 200)]
+    got = chain_convergence(outcomes, _yields(outcomes, {"a": frozenset({0}), "b": frozenset({0, 1})}), [0, 1], 1.01)
+    assert got.converged is False and got.rhat_max == float("inf")
+    assert got.existence_by_chain[1] == (0.0, 0.0, 1.0) and got.spread(1) == 1.0
+    assert any("identity 1 is in the map of some chains and not of others" in d for d in got.disagreements)
+    assert got.to_dict()["rhat_max"] == "inf"
+
+
+def test_one_chain_has_no_verdict():
+    outcomes = [_Outcome([A, B] * 50, [10.0, 9.0] * 50)]
+    got = chain_convergence(outcomes, _yields(outcomes, {"a": frozenset({0}), "b": frozenset()}), [0], 1.01)
+    assert got.converged is None and got.rhat_max is None and got.existence_by_chain[0] == (0.5,)
