@@ -90,7 +90,10 @@ def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path):
     player = processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "5.0", "--rate", "1.0"))
     assert player.wait(timeout=120) == 0
     time.sleep(3.0)  # let the detector finish the last frames
-    code, response = _call(processes, "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED))
+    chains = ("--chains", "2")  # on the node's Ray, as a user's build runs
+    code, response = _call(
+        processes, "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED), *chains
+    )
     assert code == 0, response
     assert response["success"] is True
 
@@ -108,7 +111,7 @@ def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path):
     one_process = processes.run(
         objslam_cmd(
             "map", str(BAGS / "small"), "--out", str(reference),
-            "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED),
+            "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED), *chains,
         ),
         timeout=300,
     )  # fmt: skip
@@ -124,6 +127,8 @@ def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path):
         assert got.position_m == pytest.approx(want.position_m, abs=1e-6)
         assert got.size_m == pytest.approx(want.size_m, abs=1e-6)
         assert got.existence_probability == pytest.approx(want.existence_probability, abs=1e-9)
+        assert got.existence_by_chain == pytest.approx(want.existence_by_chain, abs=1e-9)
+    assert node_map.diagnostics["convergence"]["chains"] == 2
     assert node_map.trajectory_array() == pytest.approx(expected.trajectory_array(), abs=1e-6)
 
 

@@ -22,6 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--samples", type=int, default=0, help="MCMC samples incl. burn-in (0: mapper's default)")
     build.add_argument("--burn-in", type=int, default=0, help="samples discarded first (0: mapper's default)")
     build.add_argument("--seed", type=int, default=0, help="random seed (0: mapper's default)")
+    build.add_argument("--chains", type=int, default=0, help="chains from dispersed starts (0: mapper's default)")
     build.add_argument("--wait", type=float, default=10.0, metavar="S", help="how long to wait for the service")
     build.add_argument("--timeout", type=float, default=None, metavar="S", help="give up on the answer after S s")
     build.set_defaults(func=run_build_map)
@@ -32,7 +33,12 @@ def run_build_map(args: argparse.Namespace) -> int:
 
     from objslam_msgs.srv import BuildMap
 
-    for name, value in (("--samples", args.samples), ("--burn-in", args.burn_in), ("--seed", args.seed)):
+    for name, value in (
+        ("--samples", args.samples),
+        ("--burn-in", args.burn_in),
+        ("--seed", args.seed),
+        ("--chains", args.chains),
+    ):
         if value < 0:
             print(f"objslam call: error: {name} must be >= 0", file=sys.stderr)
             return 2
@@ -44,7 +50,7 @@ def run_build_map(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return NO_SERVICE_EXIT
-        request = BuildMap.Request(samples=args.samples, burn_in=args.burn_in, seed=args.seed)
+        request = BuildMap.Request(samples=args.samples, burn_in=args.burn_in, seed=args.seed, chains=args.chains)
         started = time.monotonic()
         future = client.call_async(request)
         while rclpy.ok() and not future.done():
