@@ -111,10 +111,16 @@ class RayRunner:
                 shared[id(value)] = ray.put(value)
             return shared[id(value)]
 
-        futures = [
-            self._remote.remote(put(task.problem), put(task.tracklets), task.config, task.spec, reporter)
-            for task in tasks
-        ]
+        # Longest first (measurements x steps): Ray starts tasks in the order they come, and a
+        # long chain started last would run alone at the end while the other cores idle.
+        order = sorted(range(len(tasks)), key=lambda k: -tasks[k].problem.measurement_count * tasks[k].config.samples)
+        submitted = {
+            k: self._remote.remote(
+                put(tasks[k].problem), put(tasks[k].tracklets), tasks[k].config, tasks[k].spec, reporter, k
+            )
+            for k in order
+        }
+        futures = [submitted[k] for k in range(len(tasks))]
         total = sum(task.config.samples for task in tasks)
         pending = list(futures)
         while pending:
@@ -177,9 +183,9 @@ def _import_mapper() -> None:
     import objslam_mapper.inference.chains  # noqa: F401  (the import is the point)
 
 
-def _run_remote(problem: Any, tracklets: Any, config: Any, spec: Any, reporter: Any) -> ChainOutcome:
+def _run_remote(problem: Any, tracklets: Any, config: Any, spec: Any, reporter: Any, slot: int) -> ChainOutcome:
     def report(done: int, _total: int) -> None:
-        reporter.report.remote(spec.index, done)
+        reporter.report.remote(slot, done)  # the task's place in the run: a batch has many chains 0
 
     return run_chain_task(ChainTask(problem, tracklets, config, spec), report)
 

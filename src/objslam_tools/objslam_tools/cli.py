@@ -50,6 +50,9 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    # Other libraries' INFO lines (ArviZ announces its plotting package) are not ours to show.
+    for name in ("arviz", "ray"):
+        logging.getLogger(name).setLevel(logging.DEBUG if args.verbose else logging.WARNING)
     try:
         return int(args.func(args) or 0)
     except ObjslamError as exc:

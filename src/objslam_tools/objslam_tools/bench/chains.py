@@ -11,7 +11,7 @@ excluded), its ratio to one chain's, the chains' own seconds summed (their CPU: 
 single-threaded), the speedup (chains per wall second against one chain's), and whether
 the chains converged. Target: 2 chains on 2 cores take at most 1.2x one chain's wall time.
 
-Batch (``--batch``): the five scenarios (rendered into ``--cache-dir`` when not bundled) mapped
+Batch (``--batch``): the five scenarios (rendered into ``--bags-dir`` when not bundled) mapped
 by ``objslam map`` one after another in one process each (``parallel.backend: inprocess``:
 detector, then the chains one by one), against ``objslam map-batch`` of all five as one
 job on a local Ray of ``--workers`` CPUs (detectors and chains as tasks), both as commands
@@ -53,8 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-chains", type=int, default=2, help="chains per bag in the batch part (default 2)")
     parser.add_argument("--batch-samples", type=int, default=3000, help="samples per chain in the batch part")
     parser.add_argument("--batch-burn-in", type=int, default=1000, help="burn-in in the batch part")
+    parser.add_argument("--cache-dir", default="out/bench", help="cached detections (default out/bench)")
     parser.add_argument(
-        "--cache-dir", default="out/bench", help="rendered scenarios and detections (default out/bench)"
+        "--bags-dir", default="out/bags", help="rendered scenarios, shared with objslam results (default out/bags)"
     )
     parser.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
@@ -141,7 +142,7 @@ def _batch(args: argparse.Namespace) -> dict[str, Any]:
     from objslam_tools.results import Scenario, scenario_bag
 
     repo = default_config_dir().parent
-    bags = [scenario_bag(Scenario.parse(name), repo, Path(args.cache_dir)) for name in SCENARIOS]
+    bags = [scenario_bag(Scenario.parse(name), repo, Path(args.bags_dir)) for name in SCENARIOS]
     sampler = {"chains": args.batch_chains, "samples": args.batch_samples, "burn_in": args.batch_burn_in}
     with tempfile.TemporaryDirectory(prefix="objslam-bench-") as tmp:
         folder = Path(tmp)
