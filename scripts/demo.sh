@@ -8,7 +8,7 @@ BAG="${BAG:-bags/office}"
 OUT="${OUT:-out/$(basename "$BAG")}"
 mkdir -p "$OUT"
 
-objslam map "$BAG" --out "$OUT/map.yaml" --figures "$OUT"
+objslam map "$BAG" --out "$OUT/map.yaml" --force --figures "$OUT"
 objslam eval "$OUT/map.yaml" --bag "$BAG"
 echo
 echo "demo: map written to $OUT/map.yaml; pictures in $OUT/"

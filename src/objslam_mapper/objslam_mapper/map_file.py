@@ -164,14 +164,26 @@ def write_map(path: str | os.PathLike[str], built: BuiltMap) -> Path:
     path = Path(path)
     if path.exists():
         logger.warning("replacing existing map file %s", path)
+    tmp_name = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile("w", dir=path.parent, prefix=f".{path.name}.", delete=False) as tmp:
+            tmp_name = tmp.name
             yaml.safe_dump(map_to_dict(built), tmp, sort_keys=False, default_flow_style=None, width=120)
-        os.replace(tmp.name, path)
+        # A temporary file is private (0600); the map is an ordinary file, as open() would make it.
+        os.chmod(tmp_name, 0o666 & ~_umask())
+        os.replace(tmp_name, path)
     except OSError as exc:
+        if tmp_name is not None:
+            Path(tmp_name).unlink(missing_ok=True)
         raise MapFileError(f"cannot write map file {path}: {exc.strerror or exc}") from exc
     return path
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)  # the only way to read it is to set it
+    os.umask(mask)
+    return mask
 
 
 def read_map(path: str | os.PathLike[str]) -> BuiltMap:

@@ -116,6 +116,30 @@ def build_association_map(
     return dataclasses.replace(built, diagnostics={**built.diagnostics, **extra})
 
 
+_MINIMUM = {"samples": 1, "burn_in": 0, "seed": 0, "chains": 1}
+
+
+def with_sampler_overrides(config: MapperConfig, **given: int | None) -> MapperConfig:
+    """``config`` with the sampler settings a command line gave (None: keep the parameter's),
+    every mistake one clear :class:`UserError` naming the flag."""
+    for name, value in given.items():
+        if value is not None and value < _MINIMUM[name]:
+            raise UserError(f"--{name.replace('_', '-')} must be >= {_MINIMUM[name]}")
+    sampler = config.sampler
+    samples, burn_in = given.get("samples") or sampler.samples, given.get("burn_in")
+    burn_in = sampler.burn_in if burn_in is None else burn_in
+    if burn_in >= samples:
+        raise UserError(
+            f"the burn-in ({burn_in}) must be below the samples ({samples}): give --burn-in below --samples "
+            f"(the parameters' are {sampler.burn_in} and {sampler.samples})"
+        )
+    try:
+        sampler = dataclasses.replace(sampler, **{k: v for k, v in given.items() if v is not None})
+    except ValueError as exc:
+        raise UserError(f"sampler settings: {exc}") from exc
+    return dataclasses.replace(config, sampler=sampler)
+
+
 def convergence_line(convergence: dict) -> str:
     """One line on the chains' agreement, from a map's ``diagnostics.convergence``."""
     chains = convergence["chains"]

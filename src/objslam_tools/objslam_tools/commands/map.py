@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -36,6 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
     parser.add_argument("--detector-params", metavar="FILE", default=None, help="detector parameters")
     parser.add_argument("--figures", metavar="DIR", default=None, help="also write the pictures here")
+    parser.add_argument("--force", action="store_true", help="replace --out if it exists")
     parser.add_argument(
         "--association",
         choices=ASSOCIATIONS,
@@ -57,25 +57,26 @@ def run(args: argparse.Namespace) -> int:
     from objslam_mapper.map_file import write_map
     from objslam_mapper.parallel import chain_runner
     from objslam_tools.bag import open_bag
-    from objslam_tools.errors import UserError
-    from objslam_tools.mapping import bag_inputs, build_association_map, convergence_line, oracle_truth
+    from objslam_tools.mapping import (
+        bag_inputs,
+        build_association_map,
+        convergence_line,
+        oracle_truth,
+        with_sampler_overrides,
+    )
+    from objslam_tools.outputs import check_output_dir, check_output_file
     from objslam_tools.progress import StderrProgress
 
-    for name in ("samples", "burn_in", "seed", "chains"):
-        value = getattr(args, name)
-        if value is not None and value < (1 if name in ("samples", "chains") else 0):
-            raise UserError(f"--{name.replace('_', '-')} must be {'>= 0' if name in ('burn_in', 'seed') else '>= 1'}")
-    out = Path(args.out)
-    if out.is_dir():
-        raise UserError(f"--out {out} is a directory; give the map file's path")
     bag = open_bag(args.bag)
     params = args.params or default_config_dir() / "mapper.yaml"
+    inputs_given = [bag.path, Path(params), *([Path(args.detector_params)] if args.detector_params else [])]
+    out = check_output_file(Path(args.out), inputs_given, force=args.force)
+    if args.figures:
+        check_output_dir(Path(args.figures), inputs_given, flag="--figures")
     config = load_config(MapperConfig, params, "mapper")
-    given = (("samples", args.samples), ("burn_in", args.burn_in), ("seed", args.seed), ("chains", args.chains))
-    overrides = {k: v for k, v in given if v is not None}
-    config = dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, **overrides))
-    if config.sampler.burn_in >= config.sampler.samples:
-        raise UserError(f"--burn-in ({config.sampler.burn_in}) must be below --samples ({config.sampler.samples})")
+    config = with_sampler_overrides(
+        config, samples=args.samples, burn_in=args.burn_in, seed=args.seed, chains=args.chains
+    )
     catalog = load_catalog(config.catalog_file or None)
     truth = oracle_truth(bag) if args.association == "oracle" else None
 

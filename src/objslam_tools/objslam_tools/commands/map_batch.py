@@ -21,6 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("bags", nargs="+", metavar="BAG", help="rosbag2 directories (MCAP or sqlite3)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="folder for the map files")
     parser.add_argument("--chains", type=int, default=None, help="chains per bag (default from the parameters)")
+    parser.add_argument("--force", action="store_true", help="replace map files already in DIR")
     parser.add_argument("--seed", type=int, default=None, help="random seed (default from the parameters)")
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
     parser.add_argument("--detector-params", metavar="FILE", default=None, help="detector parameters")
@@ -54,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
     from objslam_mapper.pipeline import build_maps
     from objslam_tools.bag import open_bag
     from objslam_tools.errors import UserError
+    from objslam_tools.mapping import with_sampler_overrides
+    from objslam_tools.outputs import check_output_dir, check_output_file
     from objslam_tools.progress import StderrProgress
 
     started = time.monotonic()
@@ -61,16 +64,16 @@ def run(args: argparse.Namespace) -> int:
     names = [b.directory.name for b in bags]
     if len(set(names)) != len(names):
         raise UserError("two bags have the same folder name; their maps would overwrite each other")
-    for value, name in ((args.chains, "--chains"), (args.seed, "--seed")):
-        if value is not None and value < (1 if name == "--chains" else 0):
-            raise UserError(f"{name} must be {'>= 1' if name == '--chains' else '>= 0'}")
+    params = Path(args.params or default_config_dir() / "mapper.yaml")
+    inputs_given = [*(b.path for b in bags), params, *([Path(args.detector_params)] if args.detector_params else [])]
+    check_output_dir(args.out, inputs_given, flag="--out")
+    for name in names:
+        check_output_file(args.out / f"{name}.yaml", inputs_given, force=args.force)
+    config = with_sampler_overrides(load_config(MapperConfig, params, "mapper"), chains=args.chains, seed=args.seed)
     try:
         args.out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"cannot create --out {args.out}: {exc.strerror or exc}") from exc
-    config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
-    overrides = {k: v for k, v in (("chains", args.chains), ("seed", args.seed)) if v is not None}
-    config = dataclasses.replace(config, sampler=dataclasses.replace(config.sampler, **overrides))
     catalog = load_catalog(config.catalog_file or None)
     detector_config = load_config(DetectorConfig, args.detector_params, "detector")
 
