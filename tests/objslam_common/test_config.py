@@ -5,6 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from objslam_common.config import flatten, from_mapping, load_config, setting, unflatten
 from objslam_common.errors import ConfigError
@@ -44,6 +47,8 @@ def test_wildcard_section_applies(tmp_path):
         ({"enabled": 1}, "'enabled' must be true or false"),
         ({"noise": {"bearing_rad": -1}}, "'noise.bearing_rad' must be >= 0"),
         ({"noise": {"bering_rad": 1}}, "unknown setting 'noise.bering_rad'"),
+        ({"noise": {"bearing_rad": float("nan")}}, "'noise.bearing_rad' must be a finite number"),
+        ({"noise": {"bearing_rad": float("inf")}}, "'noise.bearing_rad' must be a finite number"),
     ],
 )
 def test_bad_values_name_the_key(mapping, message):
@@ -58,6 +63,55 @@ def test_missing_and_malformed_files_are_config_errors(tmp_path):
     bad.write_text("comp: [unclosed\n")
     with pytest.raises(ConfigError, match="cannot read"):
         load_config(Component, bad, "comp")
+
+
+def test_a_file_without_this_nodes_settings_is_refused(tmp_path):
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("# nothing yet\n")
+    with pytest.raises(ConfigError, match="is empty: expected 'comp: ros__parameters"):
+        load_config(Component, empty, "comp")
+    other = tmp_path / "other.yaml"
+    other.write_text("detector:\n  ros__parameters:\n    samples: 3\n")
+    with pytest.raises(ConfigError, match="no settings for 'comp' \\(it has 'detector'\\)"):
+        load_config(Component, other, "comp")
+
+
+def test_nan_in_a_parameter_file_is_refused(tmp_path):
+    path = tmp_path / "p.yaml"
+    path.write_text("comp:\n  ros__parameters:\n    noise:\n      bearing_rad: .nan\n")
+    with pytest.raises(ConfigError, match="finite"):
+        load_config(Component, path, "comp")
+
+
+YAML_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=12), inner, max_size=3),
+    max_leaves=8,
+)
+KEYS = st.sampled_from(["samples", "enabled", "noise", "noise.bearing_rad", "bearing_rad", "x"]) | st.text(max_size=8)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    document=st.one_of(
+        YAML_VALUES,
+        st.dictionaries(
+            st.sampled_from(["comp", "/**", "/comp", "other"]),
+            st.one_of(YAML_VALUES, st.fixed_dictionaries({"ros__parameters": st.dictionaries(KEYS, YAML_VALUES)})),
+            max_size=2,
+        ),
+    )
+)
+def test_any_parameter_file_loads_or_is_one_config_error(tmp_path_factory, document):
+    """Fuzzing: whatever YAML a user writes, the loader returns a valid config or a ConfigError."""
+    path = tmp_path_factory.mktemp("fuzz") / "p.yaml"
+    path.write_text(yaml.safe_dump(document))
+    try:
+        config = load_config(Component, path, "comp")
+    except ConfigError as exc:
+        assert str(exc) and "\n" not in str(exc)
+    else:
+        assert isinstance(config, Component) and config.samples >= 1 and config.noise.bearing_rad >= 0.0
 
 
 def test_flatten_round_trips_through_unflatten():

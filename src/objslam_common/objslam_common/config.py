@@ -13,6 +13,7 @@ Each component has one frozen dataclass of settings. Fields are declared with
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import textwrap
 import typing
@@ -80,11 +81,17 @@ def read_ros_parameters(path: str | os.PathLike[str], node_name: str) -> dict[st
 
     Nested mappings are kept nested; dotted keys are expanded into nesting.
     """
-    data = read_yaml(path) or {}
+    data = read_yaml(path)
+    if data is None:
+        raise ConfigError(f"{path} is empty: expected '{node_name}: ros__parameters: ...' (see `objslam params`)")
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping of node names")
+    keys = ("/**", node_name, f"/{node_name}")
+    if not any(key in data for key in keys):
+        found = ", ".join(repr(str(k)) for k in data) or "nothing"
+        raise ConfigError(f"{path} has no settings for '{node_name}' (it has {found}); is it the other node's file?")
     merged: dict[str, Any] = {}
-    for key in ("/**", node_name, f"/{node_name}"):
+    for key in keys:
         section = data.get(key)
         if section is None:
             continue
@@ -109,10 +116,17 @@ def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
     for key, value in flat.items():
         parts = str(key).split(".")
         node = nested
-        for part in parts[:-1]:
+        for k, part in enumerate(parts[:-1]):
             node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"'{'.'.join(parts[: k + 1])}' is given both as a value and as a section")
         if isinstance(value, dict):
-            _deep_update(node.setdefault(parts[-1], {}), unflatten(value))
+            section = node.setdefault(parts[-1], {})
+            if not isinstance(section, dict):
+                raise ConfigError(f"'{key}' is given both as a value and as a section")
+            _deep_update(section, unflatten(value))
+        elif isinstance(node.get(parts[-1]), dict):
+            raise ConfigError(f"'{key}' is given both as a value and as a section")
         else:
             node[parts[-1]] = value
     return nested
@@ -136,6 +150,8 @@ def _coerce(name: str, value: Any, annotation: Any, meta: dict[str, Any]) -> Any
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"'{name}' must be a number, got {value!r}")
         result = float(value)
+        if not math.isfinite(result):  # YAML's .nan and .inf are numbers, but no setting takes them
+            raise ConfigError(f"'{name}' must be a finite number, got {value!r}")
     elif annotation is str:
         if not isinstance(value, str):
             raise ConfigError(f"'{name}' must be a string, got {value!r}")
