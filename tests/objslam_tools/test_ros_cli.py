@@ -148,3 +148,20 @@ def test_play_sqlite3_bag_reaches_echo(processes, tmp_path):
     assert player.poll() is None, player.stderr.read()
     assert result.returncode == 0, result.stderr
     _assert_echoed_written_odometry(result.stdout)
+
+
+@pytest.mark.parametrize("verb", ["mapper", "detector"])
+def test_node_help_prints_usage_and_starts_nothing(processes, verb):
+    done = processes.run(objslam_cmd(verb, "--help"), timeout=30)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"usage: objslam {verb} [--ros-args")
+    assert f"objslam params {verb}" in done.stdout
+    assert "call /objslam/build_map" not in done.stderr and "detecting" not in done.stderr  # no node ran
+
+
+@pytest.mark.parametrize("verb", ["mapper", "detector"])
+def test_a_missing_parameter_file_is_one_line(processes, verb, tmp_path):
+    done = processes.run(objslam_cmd(verb, "--ros-args", "--params-file", str(tmp_path / "missing.yaml")), timeout=30)
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    assert done.stderr.strip() == f"objslam {verb}: error: --params-file {tmp_path / 'missing.yaml'}: no such file"
