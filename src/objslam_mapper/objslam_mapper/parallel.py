@@ -54,6 +54,9 @@ class RayRunner:
 
     def ray(self) -> Any:
         """The ``ray`` module, connected (a local Ray started on first use)."""
+        # Ray's crash handler would take SIGTERM from the process that hosts us (a node that
+        # cancels its build and answers on SIGTERM, then ends) and abort it. Read at import.
+        os.environ.setdefault("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
         try:
             import ray
         except ImportError as exc:
@@ -123,10 +126,16 @@ class RayRunner:
         futures = [submitted[k] for k in range(len(tasks))]
         total = sum(task.config.samples for task in tasks)
         pending = list(futures)
-        while pending:
-            _, pending = ray.wait(pending, num_returns=len(pending), timeout=_POLL_S)
-            if progress is not None:
-                progress(min(int(ray.get(reporter.done.remote())), total), total)
+        try:
+            while pending:
+                _, pending = ray.wait(pending, num_returns=len(pending), timeout=_POLL_S)
+                if progress is not None:
+                    progress(min(int(ray.get(reporter.done.remote())), total), total)
+        except BaseException:
+            # The caller gave up (its progress callback raised to cancel): free the workers.
+            for future in pending:
+                ray.cancel(future, force=True)
+            raise
         return list(ray.get(futures))
 
     def close(self) -> None:

@@ -8,6 +8,7 @@ dropped on the way.
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 import textwrap
@@ -482,3 +483,56 @@ def test_an_unwritable_output_dir_still_publishes_the_map_and_says_so(processes,
     assert not_a_dir.read_text() == "a file where the output folder should be\n"
     err = _stop(mapper)
     assert "the map file was not written" in err
+
+
+def _long_build(processes, chains: int) -> subprocess.Popen:
+    """`objslam call build-map` of a build far longer than the test waits for it."""
+    return processes.start(
+        objslam_cmd(
+            "call", "build-map", "--wait", "20", "--samples", "5000000", "--burn-in", "10", "--chains", str(chains)
+        )
+    )
+
+
+@pytest.mark.parametrize(("chains", "sig"), [(1, signal.SIGINT), (2, signal.SIGTERM)])
+def test_an_interrupted_build_answers_its_caller_and_the_mapper_ends_cleanly(mapper, driver, processes, chains, sig):
+    # chains 2 run on Ray: cancelling must free its workers too.
+    driver("run")
+    call = _long_build(processes, chains)
+    _wait_for_line(mapper, "sampling:", timeout=90)
+    mapper.send_signal(sig)
+    out, err = call.communicate(timeout=60)
+    response = yaml.safe_load(out)
+    assert response, err + mapper.communicate(timeout=30)[1]
+    assert call.returncode == 1, err
+    assert response["success"] is False
+    assert response["message"] == "build cancelled: the mapper is shutting down (start it again and call again)"
+    _out, mapper_err = mapper.communicate(timeout=30)
+    assert mapper.returncode == 0, mapper_err[-3000:]
+    for trouble in ("Traceback", "InvalidHandle", "never retrieved"):
+        assert trouble not in mapper_err
+
+
+def test_call_reports_a_mapper_that_died_during_the_build(mapper, driver, processes):
+    driver("run")
+    call = _long_build(processes, 1)
+    _wait_for_line(mapper, "sampling:", timeout=90)
+    mapper.kill()  # no chance to answer
+    started = time.monotonic()
+    out, err = call.communicate(timeout=90)
+    assert call.returncode == 1
+    assert out == ""
+    assert err.strip() == "objslam call: the mapper went away during the build (/objslam/build_map is gone)"
+    print(f"noticed after {time.monotonic() - started:.1f} s")
+
+
+def test_call_gives_up_after_its_timeout(mapper, driver, processes):
+    driver("run")
+    result = processes.run(
+        objslam_cmd("call", "build-map", "--wait", "20", "--samples", "5000000", "--burn-in", "10", "--chains", "1",
+                    "--timeout", "3"),
+        timeout=60,
+    )
+    assert result.returncode == 1
+    assert result.stderr.strip() == "objslam call: no answer within 3 s"
+    _stop(mapper)  # still running its build, and still stops cleanly

@@ -42,6 +42,8 @@ from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
 from objslam_mapper.inference.moves import Proposal, Proposals
 
+PROGRESS_MAX_STEPS = 500  # a cancelled build stops within this many steps of a chain
+
 LogTarget = Callable[[Association], float]
 Screen = Callable[[Association, Association], float]  # approximate log pi(J') - log pi(J)
 Progress = Callable[[int, int], None]
@@ -232,7 +234,8 @@ class MetropolisHastings:
     ) -> ChainResult:
         """Run ``samples`` steps; the states after the first ``burn_in`` steps are kept.
 
-        ``progress(done, total)`` is called about 200 times; ``on_move(state)`` with the
+        ``progress(done, total)`` is called about 200 times, and at least every
+        PROGRESS_MAX_STEPS steps (where a caller can cancel by raising); ``on_move(state)`` with the
         start state and after every accepted move (e.g. to warm-start the next solves
         from the chain's current state).
         """
@@ -254,7 +257,7 @@ class MetropolisHastings:
         trace: list[Association] = []
         log_targets: list[float] = []
         history: list[tuple[float, int]] = []
-        every = max(1, samples // 200)
+        every = max(1, min(samples // 200, PROGRESS_MAX_STEPS))
         for step in range(samples):
             proposal = self.proposals.propose(view, rng)
             if proposal is not None:

@@ -70,6 +70,7 @@ class MapperNode(Node):
         self._last_warned: dict[str, float] = {}
         self._last_progress = 0.0
         self._ray_runner: RayRunner | None = None
+        self._stopping = threading.Event()
 
         inputs = MutuallyExclusiveCallbackGroup()
         deep = QoSProfile(depth=ros.subscription_depth, reliability=ReliabilityPolicy.RELIABLE)
@@ -218,6 +219,9 @@ class MapperNode(Node):
             )
             # All three messages before publishing any, so that a failure leaves the previous map whole.
             messages = self._map_messages(built)
+        except BuildCancelledError:
+            self._fail(response, "build cancelled: the mapper is shutting down (start it again and call again)")
+            return
         except Exception as exc:
             self._fail(response, f"build failed: {type(exc).__name__}: {exc}")
             return
@@ -244,6 +248,9 @@ class MapperNode(Node):
             self.get_logger().info(response.message)
 
     def _progress(self, phase: str, done: int, total: int) -> None:
+        # Every phase of a build reports progress now and then: the place to notice a stop.
+        if self._stopping.is_set() and phase not in ("done", "failed"):
+            raise BuildCancelledError
         now = time.monotonic()
         final = phase in ("done", "failed") or done == total
         if not final and now - self._last_progress < PROGRESS_PERIOD_S:
@@ -298,6 +305,13 @@ class MapperNode(Node):
             return self._ray_runner
         return runner
 
+    def request_stop(self) -> None:
+        """Cancel a build in progress (called from the signal handler: only sets a flag)."""
+        self._stopping.set()
+
+    def busy(self) -> bool:
+        return self._build_lock.locked()
+
     def destroy_node(self) -> None:
         if self._ray_runner is not None:
             self._ray_runner.close()
@@ -307,6 +321,10 @@ class MapperNode(Node):
         c = self.buffer.counters
         buffered = f"buffered {len(self.buffer.odometry)} odometry, {len(self.buffer.images)} slice arrays"
         return f"{buffered}; dropped {c.dropped()}"
+
+
+class BuildCancelledError(Exception):
+    """Raised through the build by its progress callback when the node is asked to stop."""
 
 
 def _agreement(response: BuildMap.Response) -> str:

@@ -12,6 +12,7 @@ from objslam_tools.ros_util import message_to_plain, ros_node
 
 SERVICE = "/objslam/build_map"
 NO_SERVICE_EXIT = 1
+GONE_GRACE_S = 2.0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,7 +25,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     build.add_argument("--seed", type=int, default=0, help="random seed (0: mapper's default)")
     build.add_argument("--chains", type=int, default=0, help="chains from dispersed starts (0: mapper's default)")
     build.add_argument("--wait", type=float, default=10.0, metavar="S", help="how long to wait for the service")
-    build.add_argument("--timeout", type=float, default=None, metavar="S", help="give up on the answer after S s")
+    build.add_argument(
+        "--timeout", type=float, default=3600.0, metavar="S", help="give up on the answer after S s (default 3600)"
+    )
     build.set_defaults(func=run_build_map)
 
 
@@ -53,11 +56,21 @@ def run_build_map(args: argparse.Namespace) -> int:
         request = BuildMap.Request(samples=args.samples, burn_in=args.burn_in, seed=args.seed, chains=args.chains)
         started = time.monotonic()
         future = client.call_async(request)
+        gone_since = None
         while rclpy.ok() and not future.done():
-            if args.timeout is not None and time.monotonic() - started > args.timeout:
+            if time.monotonic() - started > args.timeout:
                 print(f"objslam call: no answer within {args.timeout:g} s", file=sys.stderr)
                 return NO_SERVICE_EXIT
             rclpy.spin_once(node, timeout_sec=0.1)
+            # A mapper that died mid-build never answers: notice that its service went away
+            # (after a grace period, as discovery may flicker).
+            if client.service_is_ready():
+                gone_since = None
+            elif gone_since is None:
+                gone_since = time.monotonic()
+            elif time.monotonic() - gone_since > GONE_GRACE_S:
+                print(f"objslam call: the mapper went away during the build ({SERVICE} is gone)", file=sys.stderr)
+                return NO_SERVICE_EXIT
         response = future.result()
     # A response is a few fields, and its message says what went wrong: print it whole.
     sys.stdout.write(yaml.safe_dump(message_to_plain(response, truncate_length=None), sort_keys=False))
