@@ -529,8 +529,20 @@ def test_call_reports_a_mapper_that_died_during_the_build(mapper, driver, proces
 def test_call_gives_up_after_its_timeout(mapper, driver, processes):
     driver("run")
     result = processes.run(
-        objslam_cmd("call", "build-map", "--wait", "20", "--samples", "5000000", "--burn-in", "10", "--chains", "1",
-                    "--timeout", "3"),
+        objslam_cmd(
+            "call",
+            "build-map",
+            "--wait",
+            "20",
+            "--samples",
+            "5000000",
+            "--burn-in",
+            "10",
+            "--chains",
+            "1",
+            "--timeout",
+            "3",
+        ),
         timeout=60,
     )
     assert result.returncode == 1
