@@ -76,3 +76,11 @@ def processes(ros_env: dict[str, str]) -> Iterator[Processes]:
         yield procs
     finally:
         procs.stop_all()
+
+
+@pytest.fixture(scope="session")
+def damaged_small_bag(tmp_path_factory) -> Path:
+    """bags/small with three bad odometry messages and two unusable frames (tests/damaged_bag.py)."""
+    from tests.damaged_bag import damaged_small
+
+    return damaged_small(BAGS, tmp_path_factory.mktemp("damaged") / "small_damaged")

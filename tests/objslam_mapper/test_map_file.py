@@ -48,3 +48,44 @@ def test_not_a_map_is_one_clear_error(tmp_path):
     path.write_text("hello: 1\n")
     with pytest.raises(MapFileError, match="not an objslam map file"):
         read_map(path)
+
+
+# Fuzzing: `objslam eval` and `objslam figures` read map files a user names; whatever the
+# file holds, read_map gives a map or one MapFileError, nothing else.
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis.strategies import binary as st_binary  # noqa: E402
+
+from objslam_mapper.map_file import map_to_dict  # noqa: E402
+from tests.fuzz import mutated  # noqa: E402
+
+_VALID = yaml.safe_load(yaml.safe_dump(map_to_dict(_map())))
+
+
+def _read_document(document, directory) -> None:
+    path = directory / "fuzzed.yaml"
+    path.write_text(yaml.safe_dump(document, allow_unicode=True))
+    try:
+        built = read_map(path)
+    except MapFileError as exc:
+        assert str(path) in str(exc) and "\n" not in str(exc)
+        return
+    assert isinstance(built, BuiltMap)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(document=mutated(_VALID))
+def test_any_map_file_reads_or_is_one_map_file_error(tmp_path, document):
+    _read_document(document, tmp_path)
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st_binary())
+def test_any_bytes_as_a_map_file_read_or_are_one_error(tmp_path, data):
+    from objslam_common.errors import ConfigError
+
+    path = tmp_path / "bytes.yaml"
+    path.write_bytes(data)
+    try:
+        read_map(path)
+    except (MapFileError, ConfigError) as exc:
+        assert "\n" not in str(exc)

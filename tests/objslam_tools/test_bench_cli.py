@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 
 def test_bench_detector_reports_images_per_second():
     result = subprocess.run(
@@ -25,3 +27,25 @@ def test_bench_without_a_target_is_a_usage_error():
         [sys.executable, "-m", "objslam_tools.cli", "bench"], capture_output=True, text=True, timeout=60, check=False
     )
     assert result.returncode == 2 and "TARGET" in result.stderr
+
+
+@pytest.mark.ros
+def test_bench_soak_answers_every_build_of_a_looped_bag(ros_env):
+    # Two laps here (the figures of many laps are in docs/reliability.md).
+    result = subprocess.run(
+        [sys.executable, "-m", "objslam_tools.cli", "bench", "soak", "--laps", "2", "--samples", "200",
+         "--burn-in", "50", "--json"],
+        capture_output=True, text=True, timeout=300, check=False, env=ros_env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert data["answered"] == data["succeeded"] == 2
+    assert all(r["objects"] > 0 and r["mapper_rss_mb"] > 50 for r in data["rows"])
+
+
+def test_bench_soak_refuses_a_bad_request():
+    result = subprocess.run(
+        [sys.executable, "-m", "objslam_tools.cli", "bench", "soak", "--laps", "0"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 2 and "--laps must be >= 1" in result.stderr and "Traceback" not in result.stderr

@@ -130,7 +130,7 @@ def test_cached_detections_are_keyed_on_the_detector():
 
     config, catalog = DetectorConfig(), load_catalog()
     assert detector_fingerprint(config, catalog) == detector_fingerprint(DetectorConfig(), load_catalog())
-    other = dataclasses.replace(config, use_compressed=not config.use_compressed)
+    other = dataclasses.replace(config, image_transport="raw")
     assert detector_fingerprint(other, catalog) != detector_fingerprint(config, catalog)
 
 

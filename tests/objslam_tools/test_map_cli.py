@@ -101,3 +101,39 @@ def test_figures_that_are_a_file_are_found_before_the_work(tmp_path):
         "is a file",
     )
     assert not (tmp_path / "m.yaml").exists()
+
+
+def test_bad_messages_are_skipped_counted_and_reported_not_fatal(damaged_small_bag, tmp_path):
+    out = tmp_path / "map.yaml"
+    done = _map(str(damaged_small_bag), "--out", str(out), *SHORT)
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+    # One warning per kind of problem (the first), then one line with every count.
+    assert "skipping an odometry message: odometry pose is not finite" in done.stderr
+    assert "skipping a frame: cannot decode compressed image" in done.stderr
+    assert (
+        "objslam map: left out 3 invalid odometry messages (NaN or non-unit quaternion), "
+        "1 frames (corrupt compressed data), 1 frames (size mismatch)"
+    ) in done.stderr
+    diagnostics = yaml.safe_load(out.read_text())["diagnostics"]
+    assert diagnostics["invalid_odometry"] == 3
+    assert diagnostics["dropped_messages"] == 3
+    assert diagnostics["skipped_frames"] == {"corrupt compressed data": 1, "size mismatch": 1}
+    assert diagnostics["slice_arrays"] == 98
+    assert diagnostics["odometry_messages"] == 992 - 3
+
+
+def test_a_calibration_that_fits_no_image_is_one_line(tmp_path):
+    from tests.damaged_bag import damage_bag
+
+    def wider(msg) -> None:
+        msg.width += 10
+
+    bag = damage_bag(BAGS / "small", tmp_path / "wrong_info", {"/camera/camera_info": dict.fromkeys(range(100), wider)})
+    done = _map(str(bag), "--out", str(tmp_path / "map.yaml"), *SHORT)
+    assert done.returncode == 2
+    assert "Traceback" not in done.stderr
+    errors = [line for line in done.stderr.splitlines() if "error:" in line]
+    assert len(errors) == 1
+    assert "no image of /camera/image_raw/compressed could be used (size mismatch: 100)" in errors[0]
+    assert "but the camera calibration is" in done.stderr  # the warning gives the sizes

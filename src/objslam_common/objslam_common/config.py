@@ -72,7 +72,7 @@ def read_yaml(path: str | os.PathLike[str]) -> Any:
             return yaml.safe_load(stream)
     except FileNotFoundError as exc:
         raise ConfigError(f"config file not found: {path}") from exc
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:  # a binary file is not UTF-8
         raise ConfigError(f"cannot read {path}: {exc}".splitlines()[0]) from exc
 
 

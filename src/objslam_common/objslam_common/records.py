@@ -43,8 +43,10 @@ class OdometrySample:
 
 def as_float32(value: float) -> float:
     """``value`` as objslam_msgs/Slice carries it (float32), so a record is the same whether
-    it came over the graph or straight from the detector."""
-    return float(np.float32(value))
+    it came over the graph or straight from the detector. Beyond float32's range it is inf,
+    which the record's check then refuses (so numpy's overflow warning is not wanted)."""
+    with np.errstate(over="ignore"):
+        return float(np.float32(value))
 
 
 @dataclass(frozen=True)

@@ -96,13 +96,20 @@ class BlobConfig:
     )
 
 
+IMAGE_TRANSPORTS = ("auto", "raw", "compressed")
+
+
 @dataclass(frozen=True)
 class DetectorConfig:
     """Everything the detector library and node need."""
 
     catalog_file: str = setting("", "class catalog file; empty = the bundled config/catalog.yaml")
     image_topic: str = setting("/camera/image_raw", "raw image topic (sensor_msgs/Image)")
-    use_compressed: bool = setting(False, "subscribe to IMAGE_TOPIC/compressed (sensor_msgs/CompressedImage) instead")
+    image_transport: str = setting(
+        "auto",
+        "auto (whichever of IMAGE_TOPIC and IMAGE_TOPIC/compressed brings images first), "
+        "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on IMAGE_TOPIC/compressed)",
+    )
     camera_info_topic: str = setting("/camera/camera_info", "calibration topic (sensor_msgs/CameraInfo, 'unified')")
     publish_debug_image: bool = setting(False, "publish the image with the slices drawn on it")
     reliable_images: bool = setting(
@@ -113,3 +120,9 @@ class DetectorConfig:
     panorama: PanoramaConfig = setting(PanoramaConfig(), "unwarping", expert=True)
     color: ColorConfig = setting(ColorConfig(), "colour gates")
     blobs: BlobConfig = setting(BlobConfig(), "mask cleaning and blob gates", expert=True)
+
+    def __post_init__(self) -> None:
+        if self.image_transport not in IMAGE_TRANSPORTS:
+            raise ValueError(
+                f"image_transport must be one of {', '.join(IMAGE_TRANSPORTS)}, got {self.image_transport!r}"
+            )

@@ -6,7 +6,7 @@ the node skips that frame, warns and counts it.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import cv2
 import numpy as np
@@ -140,3 +140,11 @@ def decode_compressed(
             f"compressed image decodes to {channels} channels, need 1, 3 or 4", reason=UNSUPPORTED_ENCODING
         )
     return (pixels[:, :, 0] if pixels.ndim == 3 and channels == 1 else pixels), encoding
+
+
+def decode_image_message(msg: Any) -> tuple[NDArray[np.uint8], str]:
+    """Pixels and encoding of a sensor_msgs/Image or sensor_msgs/CompressedImage (any object
+    with its fields: an rclpy message in the node, a rosbags one in ``objslam map``)."""
+    if hasattr(msg, "format"):  # only CompressedImage has it
+        return decode_compressed(msg.data, msg.format)
+    return image_from_buffer(msg.data, msg.width, msg.height, msg.encoding, msg.step), msg.encoding

@@ -192,5 +192,6 @@ def read_map(path: str | os.PathLike[str]) -> BuiltMap:
         raise MapFileError(f"{path}: not an objslam map file (no 'objects')")
     try:
         return map_from_dict(data)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise MapFileError(f"{path}: malformed map file: {exc}") from exc
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:  # OverflowError: int(.inf)
+        detail = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise MapFileError(f"{path}: malformed map file: {detail}") from exc

@@ -55,7 +55,23 @@ COMPRESSED_IMAGE_TYPE = "sensor_msgs/msg/CompressedImage"
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 _RAW_CHANNELS = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}
-_READ_ERRORS = (AnyReaderError, ReaderError, SerdeError, OSError, KeyError, ValueError, AssertionError)
+_READER_ERRORS = (AnyReaderError, ReaderError, SerdeError, OSError)
+# What the reader raises on damaged bytes is not only its own errors (seen: OverflowError from
+# an overwritten chunk header, ValueError, KeyError, struct.error): anything raised while
+# parsing a file is a damaged file, so all of it becomes one line (see _read_failure).
+_READ_ERRORS = (Exception,)
+
+
+def _read_failure(exc: Exception) -> str:
+    detail = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, _READER_ERRORS):
+        return detail or type(exc).__name__
+    return (
+        f"the file is damaged ({type(exc).__name__}: {detail})"
+        if detail
+        else f"the file is damaged ({type(exc).__name__})"
+    )
+
 
 # Bags written by rosbag2 embed their message definitions; this store is only the fallback.
 _JAZZY = get_typestore(Stores.ROS2_JAZZY)
@@ -164,7 +180,7 @@ class Bag:
                 for conn, stamp_ns, data in reader.messages(connections=connections):
                     yield reader, RawMessage(conn.topic, int(stamp_ns), bytes(data), conn.msgtype)
         except _READ_ERRORS as exc:
-            raise UserError(f"cannot read bag {self.path}: {exc}") from exc
+            raise UserError(f"cannot read bag {self.path}: {_read_failure(exc)}") from exc
 
     def raw_messages(self, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
         """Records of the given topics (all if None) in bag time order, undeserialized."""
@@ -180,7 +196,9 @@ class Bag:
         try:
             return reader.deserialize(raw.data, raw.msgtype)
         except _READ_ERRORS as exc:
-            raise UserError(f"bag {self.path}: cannot decode a {raw.msgtype} on {raw.topic}: {exc}") from exc
+            raise UserError(
+                f"bag {self.path}: cannot decode a {raw.msgtype} on {raw.topic}: {_read_failure(exc)}"
+            ) from exc
 
     def typed_messages(self, topic: str, msgtype: str) -> Iterator[tuple[RawMessage, Any]]:
         """Records of one topic with their deserialized messages (for the message conversions)."""
@@ -305,7 +323,6 @@ def open_bag(path: str | os.PathLike[str]) -> Bag:
             count = int(reader.message_count)
             start_ns, end_ns = (int(reader.start_time), int(reader.end_time)) if count else (0, 0)
     except _READ_ERRORS as exc:
-        detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise UserError(f"cannot read bag {path}: {detail}") from exc
+        raise UserError(f"cannot read bag {path}: {_read_failure(exc)}") from exc
     logger.debug("opened bag %s: %d topics, %d messages", path, len(topics), count)
     return Bag(path=path, topics=topics, start_ns=start_ns, end_ns=end_ns, message_count=count)

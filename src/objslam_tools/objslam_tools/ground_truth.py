@@ -307,10 +307,10 @@ def load_ground_truth(bag_dir: str | os.PathLike[str]) -> GroundTruth:
             data = yaml.safe_load(stream)
     except FileNotFoundError as exc:
         raise UserError(f"no ground truth: {path} not found (only simulated bags have one)") from exc
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:  # a binary file is not UTF-8
         raise UserError(f"cannot read {path}: {exc}".splitlines()[0]) from exc
     try:
         return ground_truth_from_dict(data)
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:  # OverflowError: int(.inf)
         detail = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
         raise UserError(f"{path}: malformed ground truth: {detail}") from exc

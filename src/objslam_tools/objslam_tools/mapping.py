@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from objslam_tools.errors import UserError
 
@@ -30,11 +30,13 @@ ASSOCIATIONS = ("sampler", "greedy", "none", "oracle")
 
 
 class BagInputs(NamedTuple):
-    """What the mapper gets from a bag: odometry, and the detector's slices per image."""
+    """What the mapper gets from a bag: odometry, the detector's slices per image, and what was skipped."""
 
     odometry: tuple[OdometrySample, ...]
     images: tuple[ImageSlices, ...]
     detection_seconds: float
+    diagnostics: dict[str, Any]  # the nodes' counts of skipped messages and frames, for the map file
+    skipped: str  # the same in words ('' if nothing was skipped)
 
 
 class Truth(NamedTuple):
@@ -45,19 +47,20 @@ class Truth(NamedTuple):
 
 
 def bag_inputs(bag: Bag, detector_config: DetectorConfig, catalog: Catalog, progress: bool = True) -> BagInputs:
-    """Run the detector over the bag's images and read its odometry."""
+    """Run the detector over the bag's images and read its odometry, as the nodes would."""
     import cv2
 
     from objslam_detector.detector import Detector
-    from objslam_tools.mapper_inputs import detect_bag, odometry_samples
+    from objslam_mapper.ros.intake import input_diagnostics
+    from objslam_tools.mapper_inputs import read_mapper_inputs
     from objslam_tools.progress import StderrProgress
 
     cv2.setNumThreads(1)
     started = time.monotonic()
     detector = Detector(detector_config, catalog)
-    odometry = odometry_samples(bag)
-    images = detect_bag(bag, detector, StderrProgress("detecting") if progress else None)
-    return BagInputs(odometry, images, time.monotonic() - started)
+    read = read_mapper_inputs(bag, detector, StderrProgress("detecting") if progress else None)
+    diagnostics = {**input_diagnostics(read.counters), "skipped_frames": dict(read.skipped_frames)}
+    return BagInputs(read.odometry, read.images, time.monotonic() - started, diagnostics, read.skipped_summary())
 
 
 def oracle_truth(bag: Bag) -> Truth:
@@ -112,7 +115,7 @@ def build_association_map(
     else:
         raise UserError(f"unknown association {association!r} (one of {', '.join(ASSOCIATIONS)})")
     elapsed = time.monotonic() - started + inputs.detection_seconds
-    extra = {"association": association, "wall_time_s": round(elapsed, 3)}
+    extra = {**inputs.diagnostics, "association": association, "wall_time_s": round(elapsed, 3)}
     return dataclasses.replace(built, diagnostics={**built.diagnostics, **extra})
 
 

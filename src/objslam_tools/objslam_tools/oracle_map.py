@@ -35,7 +35,7 @@ from objslam_mapper.map_file import BuiltMap
 from objslam_tools.bag import open_bag
 from objslam_tools.evaluate import Reference, load_reference
 from objslam_tools.ground_truth import GroundTruth
-from objslam_tools.mapper_inputs import detect_bag, odometry_samples
+from objslam_tools.mapper_inputs import read_mapper_inputs
 from objslam_tools.oracle import OracleOptions, oracle_assignment, truth_residual_chi2
 from objslam_tools.trajectory import PoseTrack
 
@@ -134,9 +134,9 @@ def oracle_problem(bag_path: str, config: MapperConfig, catalog: Catalog) -> Ora
     bag = open_bag(bag_path)
     reference = load_reference(bag_path)
     detector = Detector(load_config(DetectorConfig, None, "detector"), catalog)
-    images = detect_bag(bag, detector, lambda *_: None)
+    odometry, images, _, _ = read_mapper_inputs(bag, detector)
     graph = config.graph
-    problem = build_problem(odometry_samples(bag), images, graph.camera_mount.to_mount(), catalog, graph)
+    problem = build_problem(odometry, images, graph.camera_mount.to_mount(), catalog, graph)
     by_truth = oracle_association(problem, images, config, reference.ground_truth, reference.ground_truth_track).groups
     truth_ids = sorted(by_truth)
     return OracleProblem(problem, reference, truth_ids, [by_truth[i] for i in truth_ids])

@@ -6,6 +6,7 @@ import ast
 import re
 import sys
 import textwrap
+import time
 
 import pytest
 import yaml
@@ -24,7 +25,7 @@ def test_playing_small_yields_slices_stamped_like_the_images(processes):
     bag = open_bag(BAGS / "small")
     image_stamps = {frame.stamp_ns for frame in bag.images()}
     detector = processes.start(
-        objslam_cmd("detector", "--ros-args", "-p", "use_compressed:=true", "-p", "publish_debug_image:=true")
+        objslam_cmd("detector", "--ros-args", "-p", "publish_debug_image:=true")  # transport: auto
     )
     processes.start(objslam_cmd("play", str(BAGS / "small"), "--delay", "1.0", "--loop"))
     result = processes.run(objslam_cmd("echo", "/objslam/slices", "--once", "--timeout", "60"), timeout=90)
@@ -118,11 +119,9 @@ BAD_FRAME_WARNINGS = {
 
 @pytest.mark.parametrize("transport", ["raw", "compressed"])
 def test_bad_frames_are_skipped_with_a_warning_and_the_node_keeps_running(processes, transport):
-    # Reliable images: no frame is lost, so the counts per reason are exact.
-    compressed = "true" if transport == "compressed" else "false"
-    detector = processes.start(
-        objslam_cmd("detector", "--ros-args", "-p", "reliable_images:=true", "-p", f"use_compressed:={compressed}")
-    )
+    # Reliable images: no frame is lost, so the counts per reason are exact. The transport
+    # is left to the node (auto): it takes whichever topic the talker publishes on.
+    detector = processes.start(objslam_cmd("detector", "--ros-args", "-p", "reliable_images:=true"))
     talker = processes.start([sys.executable, "-c", BAD_THEN_GOOD, transport])
     assert talker.stdout.readline().strip() == "bad frames sent"
     # Slices published from now on come from frames sent after the bad ones (one reliable
@@ -135,6 +134,8 @@ def test_bad_frames_are_skipped_with_a_warning_and_the_node_keeps_running(proces
     _out, err = detector.communicate(timeout=10)
     assert "Traceback" not in err, err
     assert err.count("waiting for camera info") == 1
+    topic = "/camera/image_raw" + ("/compressed" if transport == "compressed" else "")
+    assert f"images arrive on {topic}: detecting on it" in err
     expected = BAD_FRAME_WARNINGS[transport]
     for reason, detail in expected.items():
         # One warning per reason for its five frames: rate-limited by reason, not by detail.
@@ -148,3 +149,21 @@ def test_bad_frames_are_skipped_with_a_warning_and_the_node_keeps_running(proces
     # 40 images before the camera info, 10 held: 30 dropped, fewer if the info overtook some.
     assert 0 < skipped["no camera info"] <= 30
     assert int(summary.group(1)) >= 10  # the images held for the camera info were not lost
+
+
+def test_a_detector_on_a_topic_without_images_says_which_topics_have_them(processes):
+    detector = processes.start(objslam_cmd("detector", "--ros-args", "-p", "image_topic:=/front/image"))
+    processes.start(objslam_cmd("play", str(BAGS / "small"), "--loop"))
+    expected = (
+        "no image has arrived on /front/image or /front/image/compressed in 5 s; "
+        "image topics on the graph: /camera/image_raw/compressed (set image_topic)"
+    )
+    deadline = time.monotonic() + 60
+    seen = []
+    while time.monotonic() < deadline:
+        line = detector.stderr.readline()
+        seen.append(line)
+        if "no image has arrived" in line and "/camera/image_raw/compressed" in line:
+            break
+    assert expected in seen[-1], "".join(seen)
+    assert detector.poll() is None

@@ -6,6 +6,11 @@ empty image) is skipped with a warning saying why, at most one per reason every
 ``WARN_PERIOD_S``, and counted per reason. Until the camera info comes the latest few
 images are held (one warning); older ones are counted as skipped for "no camera info".
 The counts are in :meth:`DetectorNode.summary`, printed at shutdown.
+
+``image_transport: auto`` (the default) subscribes to ``image_topic`` and its
+``/compressed`` and keeps whichever brings an image first, so a bag of either kind works
+without flags; while no image has arrived, a warning every ``NO_IMAGE_WARN_S`` (wall
+time: a paused bag stops sim time too) names the image topics the graph does have.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -32,13 +38,14 @@ from objslam_common.ros.spin import run_node
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_detector.errors import DetectorInputError
-from objslam_detector.images import decode_compressed, image_from_buffer
+from objslam_detector.images import decode_image_message
 from objslam_detector.overlay import draw_slices
 from objslam_msgs.msg import SliceArray
 
 SLICES_TOPIC = "/objslam/slices"
 DEBUG_IMAGE_TOPIC = "/objslam/detector/debug_image"
 WARN_PERIOD_S = 5.0
+NO_IMAGE_WARN_S = 5.0  # warn (again every so often) while no image has arrived
 PENDING_IMAGES = 10
 NO_CAMERA_INFO = "no camera info"  # beside the reasons of objslam_detector.errors
 
@@ -53,6 +60,7 @@ class DetectorNode(Node):
         self.camera: UnifiedCamera | None = None
         self.skipped: Counter[str] = Counter()  # reason -> frames skipped
         self.processed = 0
+        self._frames_seen = 0
         self._last_warned: dict[str, float] = {}  # reason -> monotonic time of its last warning
         # Camera info and the first images arrive together, in an order the executor picks:
         # hold the latest few images until the calibration is known instead of losing them.
@@ -69,14 +77,27 @@ class DetectorNode(Node):
         )
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         image_qos = reliable if self.config.reliable_images else qos_profile_sensor_data
-        if self.config.use_compressed:
-            topic = self.config.image_topic.rstrip("/") + "/compressed"
-            self.create_subscription(CompressedImage, topic, self.on_compressed, image_qos)
-        else:
-            topic = self.config.image_topic
-            self.create_subscription(Image, topic, self.on_raw, image_qos)
+        raw_topic = self.config.image_topic
+        compressed_topic = raw_topic.rstrip("/") + "/compressed"
+        transport = self.config.image_transport
+        # auto: listen on both and keep the one that brings an image first (a camera driver
+        # may publish both; taking both would detect every frame twice).
+        self._image_subs: dict[str, Any] = {}
+        if transport in ("auto", "raw"):
+            self._image_subs[raw_topic] = self.create_subscription(
+                Image, raw_topic, lambda msg: self.on_image(msg, raw_topic), image_qos
+            )
+        if transport in ("auto", "compressed"):
+            self._image_subs[compressed_topic] = self.create_subscription(
+                CompressedImage, compressed_topic, lambda msg: self.on_image(msg, compressed_topic), image_qos
+            )
+        self._image_topic: str | None = None if transport == "auto" else next(iter(self._image_subs))
+        self._started = time.monotonic()
+        self._no_image_timer = self.create_timer(
+            NO_IMAGE_WARN_S, self._warn_no_image, clock=Clock(clock_type=ClockType.STEADY_TIME)
+        )
         self.get_logger().info(
-            f"detecting {', '.join(catalog.labels)} on {topic}; slices on {SLICES_TOPIC}"
+            f"detecting {', '.join(catalog.labels)} on {' or '.join(self._image_subs)}; slices on {SLICES_TOPIC}"
             + (f", debug image on {DEBUG_IMAGE_TOPIC}" if self.debug_pub else "")
         )
 
@@ -90,14 +111,37 @@ class DetectorNode(Node):
         while self._pending:
             self._process(*self._pending.popleft())
 
-    def on_raw(self, msg: Image) -> None:
-        self._process(
-            msg.header,
-            lambda: (image_from_buffer(msg.data, msg.width, msg.height, msg.encoding, msg.step), msg.encoding),
-        )
+    def on_image(self, msg: Image | CompressedImage, topic: str) -> None:
+        if self._image_topic is None:
+            self._image_topic = topic
+            for other in [t for t in self._image_subs if t != topic]:
+                self.destroy_subscription(self._image_subs.pop(other))
+            self.get_logger().info(f"images arrive on {topic}: detecting on it ({type(msg).__name__})")
+        elif topic != self._image_topic:
+            return  # queued on the other transport before it was dropped
+        self._frames_seen += 1
+        self._process(msg.header, lambda: decode_image_message(msg))
 
-    def on_compressed(self, msg: CompressedImage) -> None:
-        self._process(msg.header, lambda: decode_compressed(msg.data, msg.format))
+    def _warn_no_image(self) -> None:
+        if self._frames_seen:
+            self._no_image_timer.cancel()
+            return
+        # Topics someone publishes images on (our own subscriptions put topics on the graph too).
+        with_images = sorted(
+            name
+            for name, types in self.get_topic_names_and_types()
+            if {"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"} & set(types)
+            and name != DEBUG_IMAGE_TOPIC
+            and self.count_publishers(name) > 0
+        )
+        self.get_logger().warn(
+            f"no image has arrived on {' or '.join(self._image_subs)} in {time.monotonic() - self._started:.0f} s"
+            + (
+                f"; image topics on the graph: {', '.join(with_images)} (set image_topic)"
+                if with_images
+                else "; no image topic is on the graph (is the bag playing?)"
+            )
+        )
 
     def summary(self) -> str:
         """E.g. ``processed 90 frames, skipped {'no camera info': 3, 'size mismatch': 5}``."""

@@ -31,8 +31,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from objslam_common.catalog import load_catalog
-from objslam_common.errors import MessageError
-from objslam_common.ros.conversions import image_slices, odometry_sample, time_from_ns
+from objslam_common.ros.conversions import time_from_ns
 from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
 from objslam_mapper.buffer import BufferCounters, InputBuffer, NothingToBuildError
@@ -41,6 +40,7 @@ from objslam_mapper.inference.chains import ChainRunner
 from objslam_mapper.map_file import BuiltMap, MapFileError, write_map
 from objslam_mapper.parallel import RayRunner, chain_runner
 from objslam_mapper.pipeline import build_map
+from objslam_mapper.ros.intake import input_diagnostics, take_odometry, take_slice_array
 from objslam_mapper.ros.map_messages import chain_agreement, to_marker_array, to_object_map, to_path
 from objslam_msgs.msg import BuildProgress, ObjectMap, SliceArray
 from objslam_msgs.srv import BuildMap
@@ -97,27 +97,20 @@ class MapperNode(Node):
             self.get_logger().warn(text)
 
     def on_odometry(self, msg: Odometry) -> None:
-        try:
-            sample = odometry_sample(msg)
-        except MessageError as exc:
-            with self._buffer_lock:
-                self.buffer.counters.invalid_odometry += 1
-                count = self.buffer.counters.invalid_odometry
-            self._warn(exc.kind, f"rejected an odometry message ({count} so far): {exc}")
-            return
         with self._buffer_lock:
             before = dataclasses.replace(self.buffer.counters)
-            self.buffer.add_odometry(sample)
+            problem = take_odometry(self.buffer, msg)
+            if problem is not None:
+                count = self.buffer.counters.invalid_odometry
+                self._warn(problem.kind, f"rejected an odometry message ({count} so far): {problem}")
+                return
             self._report_buffer_events(before, "odometry", "odometry_overflow")
 
     def on_slices(self, msg: SliceArray) -> None:
-        image, invalid = image_slices(msg)
         with self._buffer_lock:
-            if invalid:
-                self.buffer.counters.invalid_slices += invalid
-                self._warn("slices", f"left out {invalid} invalid slice(s) of one image")
             before = dataclasses.replace(self.buffer.counters)
-            self.buffer.add_slices(image)
+            if take_slice_array(self.buffer, msg):
+                self._warn("slices", f"left out {self.buffer.counters.invalid_slices} invalid slice(s) so far")
             self._report_buffer_events(before, "slice", "slices_overflow")
 
     def _report_buffer_events(self, before: BufferCounters, what: str, overflow_field: str) -> None:
@@ -214,9 +207,7 @@ class MapperNode(Node):
             built = build_map(
                 odometry, images, config, self.catalog, progress=self._progress, runner=self._runner(config)
             )
-            built = dataclasses.replace(
-                built, diagnostics={**built.diagnostics, "dropped_messages": counters.dropped(), **vars(counters)}
-            )
+            built = dataclasses.replace(built, diagnostics={**built.diagnostics, **input_diagnostics(counters)})
             # All three messages before publishing any, so that a failure leaves the previous map whole.
             messages = self._map_messages(built)
         except BuildCancelledError:

@@ -111,7 +111,7 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
     from objslam_detector.config import DetectorConfig
     from objslam_detector.detector import Detector
     from objslam_tools.bag import open_bag
-    from objslam_tools.mapper_inputs import detect_bag, odometry_samples
+    from objslam_tools.mapper_inputs import read_mapper_inputs
 
     bag = open_bag(str(bag_path))
     catalog = load_catalog(config.catalog_file or None)
@@ -126,8 +126,7 @@ def _detections(bag_path: Path, config: Any, cache_dir: Path | None) -> tuple[tu
                 return odometry, images, 0.0
     detector = Detector(detector_config, catalog)
     started = time.perf_counter()
-    odometry = odometry_samples(bag)
-    images = detect_bag(bag, detector)
+    odometry, images, _, _ = read_mapper_inputs(bag, detector)
     seconds = time.perf_counter() - started
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)

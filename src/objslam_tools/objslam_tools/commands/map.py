@@ -105,6 +105,11 @@ def run(args: argparse.Namespace) -> int:
         f"map ({args.association}): {len(built.objects)} objects ({len(built.rejected)} rejected) "
         f"from {len(inputs.images)} images and {len(inputs.odometry)} odometry messages in {elapsed:.1f} s -> {out}"
     )
+    if inputs.skipped:
+        print(
+            f"objslam map: left out {inputs.skipped} (as the nodes would; counted in the map's diagnostics)",
+            file=sys.stderr,
+        )
     convergence = built.diagnostics.get("convergence")
     if convergence:
         print(convergence_line(convergence))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -101,8 +102,12 @@ def run(args: argparse.Namespace) -> int:
             close()
     elapsed = time.monotonic() - started
     print(f"{'bag':24s} {'objects':>7s} {'rejected':>8s}  {'converged':9s} {'R-hat max':>9s} {'chains s':>9s}")
-    for name, built in zip(names, maps, strict=True):
-        built = dataclasses.replace(built, diagnostics={**built.diagnostics, "association": "sampler"})
+    for name, built, read in zip(names, maps, inputs, strict=True):
+        built = dataclasses.replace(
+            built, diagnostics={**built.diagnostics, **read.diagnostics, "association": "sampler"}
+        )
+        if read.skipped:
+            print(f"objslam map-batch: {name}: left out {read.skipped}", file=sys.stderr)
         path = write_map(args.out / f"{name}.yaml", built)
         convergence = built.diagnostics.get("convergence") or {}
         verdict = {True: "yes", False: "no", None: "-"}[convergence.get("converged")]
