@@ -526,7 +526,10 @@ def test_call_reports_a_mapper_that_died_during_the_build(mapper, driver, proces
     out, err = call.communicate(timeout=90)
     assert call.returncode == 1
     assert out == ""
-    assert err.strip() == "objslam call: the mapper went away during the build (/objslam/build_map is gone)"
+    assert err.strip() == (
+        "objslam call: the mapper went away during the build (/objslam/build_map is gone; "
+        "see its log, start it again and call again)"
+    )
     print(f"noticed after {time.monotonic() - started:.1f} s")
 
 
@@ -550,5 +553,8 @@ def test_call_gives_up_after_its_timeout(mapper, driver, processes):
         timeout=60,
     )
     assert result.returncode == 1
-    assert result.stderr.strip() == "objslam call: no answer within 3 s"
+    assert result.stderr.strip() == (
+        "objslam call: no answer within 3 s (the build may still run: watch /objslam/map/progress, "
+        "or give a longer --timeout)"
+    )
     _stop(mapper)  # still running its build, and still stops cleanly

@@ -59,7 +59,11 @@ def run_build_map(args: argparse.Namespace) -> int:
         gone_since = None
         while rclpy.ok() and not future.done():
             if time.monotonic() - started > args.timeout:
-                print(f"objslam call: no answer within {args.timeout:g} s", file=sys.stderr)
+                print(
+                    f"objslam call: no answer within {args.timeout:g} s (the build may still run: "
+                    "watch /objslam/map/progress, or give a longer --timeout)",
+                    file=sys.stderr,
+                )
                 return NO_SERVICE_EXIT
             rclpy.spin_once(node, timeout_sec=0.1)
             # A mapper that died mid-build never answers: notice that its service went away
@@ -69,7 +73,11 @@ def run_build_map(args: argparse.Namespace) -> int:
             elif gone_since is None:
                 gone_since = time.monotonic()
             elif time.monotonic() - gone_since > GONE_GRACE_S:
-                print(f"objslam call: the mapper went away during the build ({SERVICE} is gone)", file=sys.stderr)
+                print(
+                    f"objslam call: the mapper went away during the build ({SERVICE} is gone; "
+                    "see its log, start it again and call again)",
+                    file=sys.stderr,
+                )
                 return NO_SERVICE_EXIT
         response = future.result()
     # A response is a few fields, and its message says what went wrong: print it whole.
