@@ -498,13 +498,14 @@ def _long_build(processes, chains: int) -> subprocess.Popen:
     )
 
 
-@pytest.mark.parametrize(("chains", "sig"), [(1, signal.SIGINT), (2, signal.SIGTERM)])
-def test_an_interrupted_build_answers_its_caller_and_the_mapper_ends_cleanly(mapper, driver, processes, chains, sig):
-    # chains 2 run on Ray: cancelling must free its workers too.
+def test_an_interrupted_build_answers_its_caller_and_the_mapper_ends_cleanly(mapper, driver, processes):
+    # Ctrl-C during a build of 2 chains on Ray: cancelling must free its workers too, and
+    # Ray's own crash handler must not turn the signal into an abort. (SIGTERM takes the
+    # same path in run_node; the other tests stop the mapper with it.)
     driver("run")
-    call = _long_build(processes, chains)
+    call = _long_build(processes, 2)
     _wait_for_line(mapper, "sampling:", timeout=90)
-    mapper.send_signal(sig)
+    mapper.send_signal(signal.SIGINT)
     out, err = call.communicate(timeout=60)
     response = yaml.safe_load(out)
     assert response, err + mapper.communicate(timeout=30)[1]
