@@ -222,8 +222,10 @@ class Bag:
         """The camera model from the first CameraInfo (default topic: /camera/camera_info or the only one)."""
         topic = topic or self._pick_topic([CAMERA_INFO_TOPIC], [CAMERA_INFO_TYPE], "camera info")
         for _, msg in self.typed_messages(topic, CAMERA_INFO_TYPE):
+            from objslam_detector.images import detector_camera  # OpenCV: only image consumers pay for it
+
             try:
-                return camera_from_info(msg)
+                return detector_camera(camera_from_info(msg))
             except CameraModelError as exc:
                 raise UserError(f"bag {self.path}: {topic}: {exc}") from exc
         raise UserError(f"bag {self.path}: topic {topic} has no messages")

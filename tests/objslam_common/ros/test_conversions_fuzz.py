@@ -10,7 +10,7 @@ from types import SimpleNamespace as Msg
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import FisheyeCamera, PinholeCamera, UnifiedCamera
 from objslam_common.errors import CameraModelError, MessageError
 from objslam_common.ros.conversions import camera_from_info, image_slices, odometry_sample
 
@@ -70,7 +70,8 @@ def test_any_slice_array_keeps_the_valid_slices_and_counts_the_rest(header, slic
 @given(
     width=st.integers(-10, 10_000),
     height=st.integers(-10, 10_000),
-    model=st.sampled_from(["unified", "plumb_bob", "", "Unified"]) | st.text(max_size=8),
+    model=st.sampled_from(["unified", "plumb_bob", "rational_polynomial", "equidistant", "", "Unified"])
+    | st.text(max_size=8),
     d=st.lists(ANY_FLOAT, max_size=6),
     k=st.lists(ANY_FLOAT, min_size=0, max_size=10),
 )
@@ -81,6 +82,7 @@ def test_any_camera_info_is_a_camera_or_one_camera_model_error(width, height, mo
     except CameraModelError as exc:
         assert "\n" not in str(exc)
         return
-    assert isinstance(camera, UnifiedCamera)
+    assert isinstance(camera, (UnifiedCamera, PinholeCamera, FisheyeCamera))
+    assert camera.distortion_model == model
     assert camera.width_px > 0 and camera.height_px > 0
-    assert all(math.isfinite(v) for v in (camera.xi, camera.fx, camera.fy, camera.cx, camera.cy))
+    assert all(math.isfinite(v) for v in (camera.fx, camera.fy, camera.cx, camera.cy)) and min(camera.fx, camera.fy) > 0

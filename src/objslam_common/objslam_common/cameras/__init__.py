@@ -1,5 +1,58 @@
-"""Camera models: pixels to directions in the camera frame and back."""
+"""Camera models: pixels to unit rays in the camera frame and back.
 
+Every model has ``distortion_model``, ``width_px``, ``height_px``, ``project_rays(rays) ->
+(uv, valid)`` and ``unproject_pixels(uv) -> rays``; :func:`camera_from_calibration` picks
+one by ``CameraInfo.distortion_model``. The mapper measures directions, not pixels, so it
+needs no camera Jacobian: only the detector touches pixels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from objslam_common.cameras.perspective import FisheyeCamera, PinholeCamera
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
+from objslam_common.errors import CameraModelError
 
-__all__ = ["DEFAULT_CAMERA", "UnifiedCamera"]
+CameraModel = UnifiedCamera | PinholeCamera | FisheyeCamera
+DISTORTION_MODELS = ("unified", "plumb_bob", "rational_polynomial", "equidistant")
+
+
+def camera_from_calibration(
+    width_px: int, height_px: int, distortion_model: str, d: Sequence[float], k: Sequence[float]
+) -> CameraModel:
+    """The model of a sensor_msgs/CameraInfo's fields; CameraModelError in one line if none fits."""
+    try:
+        d_values = tuple(float(v) for v in np.asarray(d, dtype=float).reshape(-1))
+        k_values = [float(v) for v in np.asarray(k, dtype=float).reshape(-1)]
+    except (TypeError, ValueError) as exc:
+        raise CameraModelError(f"camera info: d and k must be numbers ({exc})") from exc
+    if distortion_model not in DISTORTION_MODELS:
+        raise CameraModelError(
+            f"unknown distortion_model {distortion_model!r} (supported: {', '.join(DISTORTION_MODELS)})"
+        )
+    if len(k_values) != 9:
+        raise CameraModelError(f"{distortion_model}: k must hold 9 values, got {len(k_values)}")
+    if distortion_model == "unified":
+        return UnifiedCamera.from_camera_info(width_px, height_px, distortion_model, d_values, k_values)
+    w, h = int(width_px), int(height_px)
+    fx, fy, cx, cy = k_values[0], k_values[4], k_values[2], k_values[5]
+    if distortion_model == "equidistant":
+        return FisheyeCamera(width_px=w, height_px=h, fx=fx, fy=fy, cx=cx, cy=cy, d=d_values)
+    return PinholeCamera(
+        distortion_model=distortion_model, width_px=w, height_px=h, fx=fx, fy=fy, cx=cx, cy=cy, d=d_values
+    )
+
+
+__all__ = [
+    "DEFAULT_CAMERA",
+    "DISTORTION_MODELS",
+    "CameraModel",
+    "CameraModelError",
+    "FisheyeCamera",
+    "PinholeCamera",
+    "UnifiedCamera",
+    "camera_from_calibration",
+]

@@ -11,10 +11,12 @@ Radius grows with elevation and the horizon is the ring ``r = f / xi``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from objslam_common.cameras.rays import directions_from_rays, rays_from_directions
 from objslam_common.errors import CameraModelError
 from objslam_common.geometry import wrap_angle
 
@@ -31,7 +33,11 @@ class UnifiedCamera:
     cx: float
     cy: float
 
+    distortion_model: ClassVar[str] = "unified"
+
     def __post_init__(self) -> None:
+        if not all(np.isfinite([self.xi, self.fx, self.fy, self.cx, self.cy])):
+            raise CameraModelError("unified: calibration values must be finite")
         if self.width_px <= 0 or self.height_px <= 0:
             raise CameraModelError(f"image size must be positive, got {self.width_px}x{self.height_px}")
         if not (0.0 < self.xi <= 1.0):
@@ -74,6 +80,19 @@ class UnifiedCamera:
         azimuth = wrap_angle(np.arctan2(ys, xs))
         elevation = np.arctan2(-zs, np.hypot(xs, ys))
         return azimuth, elevation
+
+    def project_rays(self, rays: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """(N, 2) pixels of camera-frame rays and whether each projects (the same interface
+        as the perspective and fisheye models)."""
+        azimuth, elevation = directions_from_rays(rays)
+        u, v = self.project(azimuth, elevation)
+        valid = np.isfinite(u) & np.isfinite(v)
+        return np.stack([u, v], axis=1), valid
+
+    def unproject_pixels(self, uv: ArrayLike) -> NDArray[np.float64]:
+        """(N, 3) unit camera-frame rays seen at pixels (u, v)."""
+        p = np.atleast_2d(np.asarray(uv, dtype=float))
+        return rays_from_directions(*self.unproject(p[:, 0], p[:, 1]))
 
     def radius_px(self, elevation_rad: ArrayLike) -> NDArray:
         """Image radius of an elevation, in pixels of fx (fx == fy in our rigs)."""

@@ -7,7 +7,7 @@ paths turn the same message into the same record. The writers build rclpy messag
 - nav_msgs/Odometry -> :class:`OdometrySample` (:func:`odometry_sample`)
 - objslam_msgs/Slice <-> :class:`SliceMeasurement` (:func:`slice_measurement`, :func:`slice_to_msg`)
 - objslam_msgs/SliceArray <-> :class:`ImageSlices` (:func:`image_slices`, :func:`slice_array_to_msg`)
-- sensor_msgs/CameraInfo -> :class:`UnifiedCamera` (:func:`camera_from_info`)
+- sensor_msgs/CameraInfo -> a camera model (:func:`camera_from_info`)
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from std_msgs.msg import Header
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel, camera_from_calibration
 from objslam_common.errors import MessageError, RecordError
 from objslam_common.geometry import yaw_from_quaternion
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
@@ -105,6 +105,7 @@ def slice_array_to_msg(image: ImageSlices, frame_id: str = "") -> SliceArray:
     return SliceArray(header=header, slices=[slice_to_msg(s) for s in image.slices])
 
 
-def camera_from_info(msg: Any) -> UnifiedCamera:
-    """The camera model of a sensor_msgs/CameraInfo; CameraModelError if no model fits it."""
-    return UnifiedCamera.from_camera_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+def camera_from_info(msg: Any) -> CameraModel:
+    """The camera model of a sensor_msgs/CameraInfo (by its distortion_model); CameraModelError
+    if no model fits it."""
+    return camera_from_calibration(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)

@@ -38,7 +38,7 @@ from objslam_common.ros.spin import run_node
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_detector.errors import DetectorInputError
-from objslam_detector.images import decode_image_message
+from objslam_detector.images import decode_image_message, detector_camera
 from objslam_detector.overlay import draw_slices
 from objslam_msgs.msg import SliceArray
 
@@ -103,7 +103,7 @@ class DetectorNode(Node):
 
     def on_camera_info(self, msg: CameraInfo) -> None:
         try:
-            camera = camera_from_info(msg)
+            camera = detector_camera(camera_from_info(msg))
         except CameraModelError as exc:
             self.get_logger().warn(f"ignoring camera info: {exc}", throttle_duration_sec=WARN_PERIOD_S)
             return
