@@ -59,7 +59,9 @@ def test_pinhole_models_project_and_unproject_as_opencv_does(d, seed):
     model = "plumb_bob" if len(d) == 5 else "rational_polynomial"
     camera = camera_from_calibration(640, 480, model, d, K_640x480)
     assert isinstance(camera, PinholeCamera)
-    rays = _rays_in_view(seed, 50, min(np.arctan(camera.max_tan), np.radians(55)) * 0.95)
+    # Up to 80 % of the fold's angle: near the fold the inverse is ill-conditioned and
+    # OpenCV's iteration (the reference) may settle on the fold's other side.
+    rays = _rays_in_view(seed, 50, min(np.arctan(camera.max_tan), np.radians(55)) * 0.8)
     uv, valid = camera.project_rays(rays)
     assert valid.all()
     reference, _ = cv2.projectPoints(optical_from_camera(rays), np.zeros(3), np.zeros(3), _k(camera), np.array(d))

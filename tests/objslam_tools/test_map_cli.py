@@ -8,7 +8,6 @@ import shutil
 import stat
 import subprocess
 
-import numpy as np
 import pytest
 import yaml
 
@@ -138,21 +137,3 @@ def test_a_calibration_that_fits_no_image_is_one_line(tmp_path):
     assert len(errors) == 1
     assert "no image of /camera/image_raw/compressed could be used (size mismatch: 100)" in errors[0]
     assert "but the camera calibration is" in done.stderr  # the warning gives the sizes
-
-
-def test_a_perspective_bag_is_refused_in_one_line_until_the_detector_takes_it(tmp_path):
-    from tests.damaged_bag import damage_bag
-
-    def plumb_bob(msg) -> None:
-        msg.distortion_model = "plumb_bob"
-        msg.d = np.zeros(5)
-
-    bag = damage_bag(
-        BAGS / "small", tmp_path / "pinhole", {"/camera/camera_info": dict.fromkeys(range(100), plumb_bob)}
-    )
-    done = _map(str(bag), "--out", str(tmp_path / "map.yaml"), *SHORT)
-    assert done.returncode == 2 and "Traceback" not in done.stderr
-    assert (
-        "the detector handles only the omnidirectional camera (distortion_model unified) so far, not plumb_bob"
-        in done.stderr
-    )

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel, UnifiedCamera
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.errors import ConfigError
 from objslam_common.records import SliceMeasurement
@@ -48,13 +48,13 @@ class Detector:
             self.gates: tuple[ColorGate, ...] = derive_gates(self.catalog, self.config.color)
         except ValueError as exc:
             raise ConfigError(str(exc)) from exc
-        self._panoramas: OrderedDict[UnifiedCamera, tuple[Panorama, Segmenter]] = OrderedDict()
+        self._panoramas: OrderedDict[CameraModel, tuple[Panorama, Segmenter]] = OrderedDict()
 
-    def panorama(self, camera: UnifiedCamera) -> Panorama:
+    def panorama(self, camera: CameraModel) -> Panorama:
         """Remap tables of a calibration, built on first use."""
         return self._for_camera(camera)[0]
 
-    def detect(self, image: NDArray, camera: UnifiedCamera, encoding: str = "rgb8") -> list[SliceMeasurement]:
+    def detect(self, image: NDArray, camera: CameraModel, encoding: str = "rgb8") -> list[SliceMeasurement]:
         """Slices of one image, in no particular order.
 
         ``image`` is (H, W, C) or (H, W) uint8 in ``encoding`` (rgb8, bgr8, rgba8, bgra8,
@@ -71,7 +71,7 @@ class Detector:
             slices.append(measure(blob, label, rgb, pano, truncated, self.config.blobs.truncated_confidence))
         return slices
 
-    def unwarp(self, image: NDArray, camera: UnifiedCamera, encoding: str = "rgb8") -> NDArray[np.uint8]:
+    def unwarp(self, image: NDArray, camera: CameraModel, encoding: str = "rgb8") -> NDArray[np.uint8]:
         """The checked image as an RGB panorama (rows: elevation, columns: azimuth)."""
         color = as_color_image(image, encoding)
         check_size(color.pixels, camera)
@@ -83,7 +83,7 @@ class Detector:
         index = classify(cv2.cvtColor(rgb_panorama, cv2.COLOR_RGB2HSV_FULL), self.gates)
         return clean(index, self.config.blobs.opening_kernel_px)
 
-    def _for_camera(self, camera: UnifiedCamera) -> tuple[Panorama, Segmenter]:
+    def _for_camera(self, camera: CameraModel) -> tuple[Panorama, Segmenter]:
         entry = self._panoramas.get(camera)
         if entry is None:
             pano = Panorama.build(camera, self.config.panorama)
@@ -116,10 +116,22 @@ def _at_view_edge(blob: Blob, pano: Panorama, rgb_panorama: NDArray[np.uint8]) -
 
     Mirror cameras (and renderers) leave the image black outside a circle that may lie
     inside the image rectangle, so black right above or below a blob also means the
-    view cut it.
+    view cut it. A perspective or fisheye camera's view ends left and right too: a blob
+    beside the part of the panorama it does not see is cut there.
     """
     if blob.row0 == 0 or blob.row0 + blob.rows >= pano.rows:
         return True
+    if not isinstance(pano.camera, UnifiedCamera):
+        body = slice(blob.row0, blob.row0 + blob.rows)
+        beside = np.concatenate(
+            [
+                strip(pano.inside, body, blob.col0 - 1, blob.col0),
+                strip(pano.inside, body, blob.col0 + blob.cols, blob.col0 + blob.cols + 1),
+            ],
+            axis=1,
+        )
+        if not beside.all():
+            return True
     rows = slice(blob.row0 - 1, blob.row0 + blob.rows + 1, blob.rows + 1)  # the rows just above and below
     cols = (blob.col0, blob.col0 + blob.cols)
     if not strip(pano.inside, rows, *cols).all():

@@ -13,8 +13,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_common.cameras import CameraModel
-from objslam_common.cameras.unified import UnifiedCamera
-from objslam_common.errors import CameraModelError
 from objslam_detector.errors import (
     CORRUPT_COMPRESSED,
     EMPTY_IMAGE,
@@ -72,7 +70,7 @@ def as_color_image(image: NDArray, encoding: str = "rgb8") -> ColorImage:
     return ColorImage(image, order)
 
 
-def check_size(image: NDArray, camera: UnifiedCamera) -> None:
+def check_size(image: NDArray, camera: CameraModel) -> None:
     """The image must be as large as its calibration says."""
     height, width = image.shape[:2]
     if (width, height) != (camera.width_px, camera.height_px):
@@ -150,14 +148,3 @@ def decode_image_message(msg: Any) -> tuple[NDArray[np.uint8], str]:
     if hasattr(msg, "format"):  # only CompressedImage has it
         return decode_compressed(msg.data, msg.format)
     return image_from_buffer(msg.data, msg.width, msg.height, msg.encoding, msg.step), msg.encoding
-
-
-def detector_camera(camera: CameraModel) -> UnifiedCamera:
-    """The camera as the detector can use it: the detector unwarps the omnidirectional
-    (unified) image only so far; CameraModelError in one line for the other models."""
-    if not isinstance(camera, UnifiedCamera):
-        raise CameraModelError(
-            f"the detector handles only the omnidirectional camera (distortion_model unified) so far, "
-            f"not {camera.distortion_model}"
-        )
-    return camera

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel, UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_common.records import SliceMeasurement
 from objslam_detector.blobs import Blob, strip
@@ -174,7 +174,7 @@ def _quadratic_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[floa
     return c0, c1, c2
 
 
-def image_angle(camera: UnifiedCamera, azimuth_rad: float) -> float:
+def image_angle(camera: CameraModel, azimuth_rad: float) -> float:
     """Angle in the image (counter-clockwise from +u, v up) where an azimuth appears; the azimuth if fx == fy."""
     return float(np.arctan2(camera.fy * np.sin(azimuth_rad), camera.fx * np.cos(azimuth_rad)))
 
@@ -206,8 +206,13 @@ def measure(
     el_top = float(pano.row_elevation(row_lo + top))
     el_bottom = float(pano.row_elevation(row_lo + bottom))
     camera = pano.camera
-    angle_start = image_angle(camera, az_start)
-    angle_end = angle_start + (image_angle(camera, az_start + width) - angle_start) % _TWO_PI
+    # The image-space sector (for overlays) is the omnidirectional image's ring sector; other
+    # models' overlays project the slice's corners instead (objslam_detector.overlay).
+    angle_start = angle_end = radius_inner = radius_outer = 0.0
+    if isinstance(camera, UnifiedCamera):
+        angle_start = image_angle(camera, az_start)
+        angle_end = angle_start + (image_angle(camera, az_start + width) - angle_start) % _TWO_PI
+        radius_inner, radius_outer = float(camera.radius_px(el_bottom)), float(camera.radius_px(el_top))
     confidence = blob.fill_ratio * (truncated_confidence if truncated else 1.0)
     return SliceMeasurement(
         label=label,
@@ -216,8 +221,8 @@ def measure(
         angular_width_rad=float(width),
         elevation_bottom_rad=el_bottom,
         elevation_top_rad=el_top,
-        radius_inner_px=float(camera.radius_px(el_bottom)),
-        radius_outer_px=float(camera.radius_px(el_top)),
+        radius_inner_px=radius_inner,
+        radius_outer_px=radius_outer,
         angle_start_rad=angle_start,
         angle_end_rad=angle_end,
         pixel_count=blob.pixel_count,

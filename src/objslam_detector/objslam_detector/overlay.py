@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel
 from objslam_common.records import SliceMeasurement
 from objslam_detector.images import as_color_image
 
@@ -16,7 +16,7 @@ _DEFAULT_RGB = (255, 255, 255)
 _ARC_POINTS = 24
 
 
-def sector_outline(camera: UnifiedCamera, sl: SliceMeasurement, points_per_arc: int = _ARC_POINTS) -> NDArray[np.int32]:
+def sector_outline(camera: CameraModel, sl: SliceMeasurement, points_per_arc: int = _ARC_POINTS) -> NDArray[np.int32]:
     """Closed outline (N, 2) in pixels: the lower arc, then the upper arc backwards."""
     half = 0.5 * sl.angular_width_rad
     azimuth = np.linspace(sl.bearing_rad - half, sl.bearing_rad + half, points_per_arc)
@@ -31,7 +31,7 @@ def sector_outline(camera: UnifiedCamera, sl: SliceMeasurement, points_per_arc: 
 def draw_slices(
     image: NDArray,
     slices: Iterable[SliceMeasurement],
-    camera: UnifiedCamera,
+    camera: CameraModel,
     encoding: str = "rgb8",
     class_rgb: Mapping[str, tuple[int, int, int]] | None = None,
 ) -> NDArray[np.uint8]:

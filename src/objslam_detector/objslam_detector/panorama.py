@@ -1,10 +1,12 @@
-"""Unwarping the omnidirectional image into an azimuth x elevation panorama.
+"""Unwarping a camera's image into an azimuth x elevation panorama (any camera model).
 
 Columns are azimuth (left edge of column 0 at -pi, increasing counter-clockwise), rows
 are elevation (top row highest). A vertical cylinder's silhouette edges are vertical
 lines in space, hence columns of the panorama: its angular width and edge elevations
 are read off a blob's extreme columns and rows. The remap tables are built once per
-calibration.
+calibration. The panorama always spans every azimuth: a perspective or fisheye camera
+fills the part it sees (``inside``) and leaves the rest black, which the detector reads as
+the edge of the view.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel, UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_detector.config import PanoramaConfig
 
@@ -28,7 +30,7 @@ _LIMIT_MARGIN_RAD = math.radians(1.0)
 class Panorama:
     """Sampling grid and remap tables of one calibration."""
 
-    camera: UnifiedCamera
+    camera: CameraModel
     azimuth_step_rad: float
     elevation_step_rad: float
     top_elevation_rad: float  # upper edge of row 0
@@ -39,7 +41,7 @@ class Panorama:
     inside: NDArray[np.bool_] = field(repr=False)  # panorama pixels that sample the image
 
     @classmethod
-    def build(cls, camera: UnifiedCamera, config: PanoramaConfig) -> Panorama:
+    def build(cls, camera: CameraModel, config: PanoramaConfig) -> Panorama:
         cols = max(8, round(360.0 / config.azimuth_resolution_deg))
         az_step = 2.0 * math.pi / cols
         el_step = math.radians(config.elevation_resolution_deg)
@@ -87,9 +89,21 @@ class Panorama:
         return (self.top_elevation_rad - np.asarray(elevation_rad, dtype=float)) / self.elevation_step_rad
 
 
-def highest_visible_elevation(camera: UnifiedCamera) -> float:
-    """Highest elevation that still lands in the image (at its farthest corner) or projects at all."""
-    corners_u = np.array([0.0, camera.width_px - 1.0, 0.0, camera.width_px - 1.0])
-    corners_v = np.array([0.0, 0.0, camera.height_px - 1.0, camera.height_px - 1.0])
-    _az, elevation = camera.unproject(corners_u, corners_v)
-    return float(min(np.max(elevation), camera.max_elevation_rad - _LIMIT_MARGIN_RAD))
+def highest_visible_elevation(camera: CameraModel) -> float:
+    """Highest elevation that still lands in the image or projects at all.
+
+    Omnidirectional: at the image's farthest corner, below the model's limit. Other models:
+    the highest direction seen along the image's border (their view is a cone around the
+    optical axis, so the border holds its extremes).
+    """
+    if isinstance(camera, UnifiedCamera):
+        corners_u = np.array([0.0, camera.width_px - 1.0, 0.0, camera.width_px - 1.0])
+        corners_v = np.array([0.0, 0.0, camera.height_px - 1.0, camera.height_px - 1.0])
+        _az, elevation = camera.unproject(corners_u, corners_v)
+        return float(min(np.max(elevation), camera.max_elevation_rad - _LIMIT_MARGIN_RAD))
+    w, h = camera.width_px - 1.0, camera.height_px - 1.0
+    t = np.linspace(0.0, 1.0, 200)
+    u = np.concatenate([t * w, t * w, np.zeros_like(t), np.full_like(t, w)])
+    v = np.concatenate([np.zeros_like(t), np.full_like(t, h), t * h, t * h])
+    _az, elevation = camera.unproject(u, v)
+    return float(min(np.nanmax(elevation), math.pi / 2 - _LIMIT_MARGIN_RAD))

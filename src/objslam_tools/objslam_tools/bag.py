@@ -8,7 +8,7 @@ classes stay inside this module. Usage::
     for msg in bag.raw_messages(["/odom"]):     # RawMessage(topic, stamp_ns, data, msgtype), time order
         ...
     odom = bag.read_odometry()                  # PoseTrack: stamps_ns (N,) int64, poses (N, 3)
-    camera = bag.read_camera()                  # objslam_common.cameras.UnifiedCamera
+    camera = bag.read_camera()                  # an objslam_common.cameras model
     for frame in bag.images():                  # ImageFrame(stamp_ns, encoding, data)
         rgb = decode_rgb(frame)                 # (H, W, 3) uint8
 
@@ -33,7 +33,7 @@ from rosbags.rosbag2 import ReaderError
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel
 from objslam_common.errors import CameraModelError
 from objslam_common.geometry import yaw_from_quaternion
 from objslam_common.ros.conversions import camera_from_info
@@ -218,14 +218,12 @@ class Bag:
             raise UserError(f"bag {self.path}: topic {topic} has no messages")
         return PoseTrack(np.array(stamps, dtype=np.int64), np.array(poses, dtype=float))
 
-    def read_camera(self, topic: str | None = None) -> UnifiedCamera:
+    def read_camera(self, topic: str | None = None) -> CameraModel:
         """The camera model from the first CameraInfo (default topic: /camera/camera_info or the only one)."""
         topic = topic or self._pick_topic([CAMERA_INFO_TOPIC], [CAMERA_INFO_TYPE], "camera info")
         for _, msg in self.typed_messages(topic, CAMERA_INFO_TYPE):
-            from objslam_detector.images import detector_camera  # OpenCV: only image consumers pay for it
-
             try:
-                return detector_camera(camera_from_info(msg))
+                return camera_from_info(msg)
             except CameraModelError as exc:
                 raise UserError(f"bag {self.path}: {topic}: {exc}") from exc
         raise UserError(f"bag {self.path}: topic {topic} has no messages")

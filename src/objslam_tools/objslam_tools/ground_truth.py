@@ -185,9 +185,16 @@ def _distractor(d: Mapping[str, Any], index: int) -> Distractor:
     )
 
 
+def _mapping(d: Any, name: str) -> Mapping[str, Any]:
+    if not isinstance(d, dict):
+        raise ValueError(f"'{name}' must be a mapping, got {d!r}")
+    return d
+
+
 def _mount(d: Mapping[str, Any] | None) -> CameraMount:
     if d is None:
         return CameraMount()
+    d = _mapping(d, "camera_mount")
     known = {"height_m", "offset_x_m", "offset_y_m", "yaw_rad"}
     unknown = sorted(set(d) - known)
     if unknown:
@@ -198,6 +205,7 @@ def _mount(d: Mapping[str, Any] | None) -> CameraMount:
 def _room(d: Mapping[str, Any] | None) -> Room | None:
     if d is None:
         return None
+    d = _mapping(d, "room")
     x = _floats(d["x"], 2, "room.x")
     y = _floats(d["y"], 2, "room.y")
     if x[0] >= x[1] or y[0] >= y[1]:

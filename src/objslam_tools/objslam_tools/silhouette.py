@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel, UnifiedCamera
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_slices
 from objslam_tools.ground_truth import GroundTruth, GroundTruthObject
 from objslam_tools.sim.scene import SIGN_POST_RADIUS_M
@@ -79,8 +79,13 @@ class _Thing(NamedTuple):
     supports: int | None = None  # the object standing on it (tables)
 
 
-def view_top_elevation(camera: UnifiedCamera, circle_radius_px: float | None = None) -> float:
-    """Highest elevation inside the image circle (default: the largest circle inside the image)."""
+def view_top_elevation(camera: CameraModel, circle_radius_px: float | None = None) -> float:
+    """Highest elevation inside the image circle (default: the largest circle inside the
+    image); for a perspective or fisheye camera, the highest direction it sees."""
+    if not isinstance(camera, UnifiedCamera):
+        from objslam_detector.panorama import highest_visible_elevation
+
+        return highest_visible_elevation(camera)
     if circle_radius_px is None:
         circle_radius_px = min(camera.cx, camera.cy, camera.width_px - 1 - camera.cx, camera.height_px - 1 - camera.cy)
     grid = np.linspace(-math.pi / 2, camera.max_elevation_rad - 1e-3, 4000)
@@ -122,7 +127,7 @@ def _cover(
 def visible_objects(
     ground_truth: GroundTruth,
     map_T_base: ArrayLike,
-    camera: UnifiedCamera,
+    camera: CameraModel,
     min_elevation_rad: float = math.radians(-80.0),
     circle_radius_px: float | None = None,
 ) -> list[VisibleObject]:
@@ -180,11 +185,34 @@ def visible_objects(
                 elevation_top_rad=top,
                 range_m=float(pred.range_m[k]),
                 occluded_fraction=fraction,
-                in_view=bool(top <= view_top and bottom >= min_elevation_rad),
-                width_px=float(values[WIDTH] * camera.radius_px(mid)),
+                in_view=bool(top <= view_top and bottom >= min_elevation_rad)
+                and _inside_image(camera, float(values[BEARING]), float(values[WIDTH]), bottom, top),
+                width_px=_width_px(camera, float(values[BEARING]), float(values[WIDTH]), mid),
             )
         )
     return out
+
+
+def _inside_image(camera: CameraModel, bearing: float, width: float, bottom: float, top: float) -> bool:
+    """The silhouette's four corners project into the image (always, for the omnidirectional
+    camera: its view is all around, bounded in elevation only)."""
+    if isinstance(camera, UnifiedCamera):
+        return True
+    azimuth = np.array([bearing - width / 2, bearing + width / 2] * 2)
+    elevation = np.array([bottom, bottom, top, top])
+    u, v = camera.project(azimuth, elevation)
+    return bool(
+        np.all(np.isfinite(u))
+        and np.all((u >= 0) & (u <= camera.width_px - 1) & (v >= 0) & (v <= camera.height_px - 1))
+    )
+
+
+def _width_px(camera: CameraModel, bearing: float, width: float, elevation: float) -> float:
+    """How many pixels across the silhouette is, at ``elevation``."""
+    if isinstance(camera, UnifiedCamera):
+        return float(width * camera.radius_px(elevation))
+    u, v = camera.project(np.array([bearing - width / 2, bearing + width / 2]), np.array([elevation, elevation]))
+    return float(np.hypot(u[1] - u[0], v[1] - v[0])) if np.all(np.isfinite(u)) else 0.0
 
 
 def _hidden_fraction(low: NDArray, high: NDArray, seen: NDArray, covers: list[tuple[NDArray, NDArray]]) -> float:

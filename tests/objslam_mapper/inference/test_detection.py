@@ -15,12 +15,13 @@ from objslam_mapper.config import DetectionConfig, GraphConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.detection import (
     Sight,
+    View,
+    camera_view,
     detection_log_likelihood,
     hidden,
     sight,
     sightings,
     table_sight,
-    view_top_elevation,
     visible,
 )
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
@@ -37,8 +38,11 @@ class _Problem:
         self.measurement_pose = np.asarray(measurement_pose, dtype=np.int64)
 
 
-def _shown(poses, things, config=CONFIG, view_top=0.4):
-    seen = sight(_Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), config, view_top)
+VIEW = View(0.4)
+
+
+def _shown(poses, things, config=CONFIG, view=VIEW):
+    seen = sight(_Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), config, view)
     return visible(seen, seen, config)
 
 
@@ -68,10 +72,13 @@ def test_each_image_in_view_without_a_slice_costs_log_one_minus_pd():
     thing = np.array([[2.0, 2.0, 0.0, 0.4, 0.4]])
     # Slices of the object in 3 of the 10 images (measurement -> pose 0, 4, 9).
     problem = _Problem(measurement_pose=[0, 4, 9])
-    value = detection_log_likelihood(problem, poses, thing, [np.array([0, 1, 2])], CONFIG, 0.4)
+    value = detection_log_likelihood(problem, poses, thing, [np.array([0, 1, 2])], CONFIG, View(0.4))
     assert value == pytest.approx(7 * math.log1p(-CONFIG.probability))
     assert (
-        detection_log_likelihood(problem, poses, thing, [np.array([0, 1, 2])], DetectionConfig(enabled=False), 0.4) == 0
+        detection_log_likelihood(
+            problem, poses, thing, [np.array([0, 1, 2])], DetectionConfig(enabled=False), View(0.4)
+        )
+        == 0
     )
 
 
@@ -83,9 +90,32 @@ def test_the_view_top_is_read_off_the_slices_upper_edges():
     )
     run = simulate_run(poses, [k * 250_000_000 for k in range(40)], scene, load_catalog(), np.random.default_rng(0))
     problem = build_problem(run.odometry, run.images, MOUNT, load_catalog(), GraphConfig())
-    top = view_top_elevation(problem, CONFIG)
-    assert top == pytest.approx(np.quantile(problem.measurements[:, 3], 0.995))
-    assert top > 0.0  # the cyan object's top is above the camera
+    view = camera_view(problem, CONFIG)
+    assert view.top_rad == pytest.approx(np.quantile(problem.measurements[:, 3], 0.995))
+    assert view.top_rad > 0.0  # the cyan object's top is above the camera
+    # Two objects leave most bearings without a slice: the view looks limited there, which
+    # only stops counting misses where no slice ever was (camera_view's docstring).
+
+
+def test_a_camera_that_looks_one_way_has_a_view_read_off_the_slices():
+    # Slices only between -40 and +40 degrees (a forward camera): the view is that span.
+    bearings = np.radians([-38.0, -10.0, 5.0, 37.0])
+    widths = np.radians([4.0, 2.0, 2.0, 6.0])
+    measurements = np.column_stack([bearings, widths, [-0.3, -0.2, -0.25, -0.1], [0.1, 0.2, 0.3, 0.15]])
+    view = camera_view(_Measured(measurements), CONFIG)
+    assert view.azimuth_lo_rad == pytest.approx(np.radians(-40.0))
+    assert view.azimuth_span_rad == pytest.approx(np.radians(80.0))
+    assert view.bottom_rad == pytest.approx(np.quantile(measurements[:, 2], 0.005))
+    # A thing wholly inside the bearings is in view, one outside or across the edge is not.
+    ahead, aside, across = [3.0, 0.0, 0.0, 0.3, 0.6], [0.0, 3.0, 0.0, 0.3, 0.6], [3.0, 2.5, 0.0, 0.3, 0.6]
+    seen = sight(_Problem(), np.array(ROBOT, dtype=float), np.array([ahead, aside, across]), CONFIG, view)
+    assert seen.in_view.tolist() == [[True, False, False]]
+
+
+class _Measured:
+    def __init__(self, measurements):
+        self.measurements = np.asarray(measurements, dtype=float)
+        self.measurement_count = len(self.measurements)
 
 
 def test_a_thing_is_hidden_by_any_nearer_one_that_covers_it():
@@ -93,7 +123,7 @@ def test_a_thing_is_hidden_by_any_nearer_one_that_covers_it():
     nearer = [1.0, 0.02, 0.0, 0.3, 0.6]
     far = [5.0, 0.0, 0.0, 0.4, 0.4]
     poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.pi / 2]])
-    seen = sight(_Problem(), poses, np.array([near, nearer, far]), CONFIG, 0.4)
+    seen = sight(_Problem(), poses, np.array([near, nearer, far]), CONFIG, VIEW)
     # The far one is behind both, the near one behind the nearer (the heading does not matter).
     assert hidden(seen, seen, CONFIG).tolist() == [[True, False, True]] * 2
     assert hidden(seen, seen.columns([2]), CONFIG).tolist() == [[False, False, False]] * 2  # nothing behind
@@ -118,7 +148,7 @@ def test_a_short_thing_does_not_hide_a_tall_one_that_stands_out_above_it():
 
 def _sightings_with_tables(things, on_table, poses=ROBOT):
     return sightings(
-        _Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), [], CONFIG, 0.4, on_table=on_table
+        _Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), [], CONFIG, VIEW, on_table=on_table
     )
 
 
@@ -135,7 +165,7 @@ def test_a_table_hides_what_is_behind_it_but_not_the_object_on_it():
     assert tables.top[0, 0] == pytest.approx(np.arctan2(0.72 - MOUNT.height_m, 2.0 - CONFIG.table_diameter_m / 2))
     no_tables = DetectionConfig(table_diameter_m=0.0)
     seen = sightings(
-        _Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [], no_tables, 0.4, on_table=[True, False]
+        _Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [], no_tables, VIEW, on_table=[True, False]
     )
     assert not seen.hidden.any()
 

@@ -333,7 +333,7 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
 
     def missed(groups, things):
         members = [target.measurements(g) for g in groups]
-        seen = sightings(problem, poses, things, members, detection, target.view_top_rad)
+        seen = sightings(problem, poses, things, members, detection, target.view)
         return dict(zip(groups, seen.missed.sum(axis=0).tolist(), strict=True))
 
     before = missed(old, estimates)

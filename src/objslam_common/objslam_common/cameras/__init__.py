@@ -46,13 +46,37 @@ def camera_from_calibration(
     )
 
 
+def camera_info_fields(camera: CameraModel) -> tuple[str, tuple[float, ...]]:
+    """(distortion_model, d) of a model as sensor_msgs/CameraInfo carries them."""
+    if isinstance(camera, UnifiedCamera):
+        return "unified", (camera.xi,)
+    return camera.distortion_model, tuple(camera.d)
+
+
+# The simulator's cameras (`objslam sim --camera`): the bundled omnidirectional one, a
+# common 640x480 perspective camera about 90 degrees across with a little barrel
+# distortion, and a fisheye of about 180 degrees.
+PRESET_CAMERAS: dict[str, CameraModel] = {
+    "omni": DEFAULT_CAMERA,
+    "pinhole": PinholeCamera(
+        distortion_model="plumb_bob", width_px=640, height_px=480, fx=320.0, fy=320.0, cx=319.5, cy=239.5,
+        d=(-0.05, 0.01, 0.0, 0.0, 0.0),
+    ),
+    "fisheye": FisheyeCamera(
+        width_px=640, height_px=640, fx=200.0, fy=200.0, cx=319.5, cy=319.5, d=(0.02, -0.005, 0.0, 0.0)
+    ),
+}  # fmt: skip
+
+
 __all__ = [
     "DEFAULT_CAMERA",
     "DISTORTION_MODELS",
+    "PRESET_CAMERAS",
     "CameraModel",
     "CameraModelError",
     "FisheyeCamera",
     "PinholeCamera",
     "UnifiedCamera",
     "camera_from_calibration",
+    "camera_info_fields",
 ]

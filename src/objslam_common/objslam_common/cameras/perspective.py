@@ -24,7 +24,13 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from objslam_common.cameras.rays import camera_from_optical, normalized, optical_from_camera
+from objslam_common.cameras.rays import (
+    camera_from_optical,
+    directions_from_rays,
+    normalized,
+    optical_from_camera,
+    rays_from_directions,
+)
 from objslam_common.errors import CameraModelError
 
 _NEWTON_STEPS = 30
@@ -50,8 +56,32 @@ def _first_fold(radial_map, limit: float) -> float:
     return float(t[int(np.argmin(grows))])
 
 
+class _Angles:
+    """Azimuth/elevation access to a ray model, the interface the detector's panorama, its
+    overlay and the renderer use (as :class:`UnifiedCamera` has it)."""
+
+    def project_rays(self, rays: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        raise NotImplementedError
+
+    def unproject_pixels(self, uv: ArrayLike) -> NDArray[np.float64]:
+        raise NotImplementedError
+
+    def project(self, azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> tuple[NDArray, NDArray]:
+        """Pixel (u, v) of directions (broadcast); NaN where a direction is not seen."""
+        a, e = np.broadcast_arrays(np.asarray(azimuth_rad, dtype=float), np.asarray(elevation_rad, dtype=float))
+        uv, valid = self.project_rays(rays_from_directions(a, e))
+        uv = np.where(valid[:, None], uv, np.nan)
+        return uv[:, 0].reshape(a.shape), uv[:, 1].reshape(a.shape)
+
+    def unproject(self, u_px: ArrayLike, v_px: ArrayLike) -> tuple[NDArray, NDArray]:
+        """Direction (azimuth, elevation) seen at pixels (u, v) (broadcast)."""
+        u, v = np.broadcast_arrays(np.asarray(u_px, dtype=float), np.asarray(v_px, dtype=float))
+        azimuth, elevation = directions_from_rays(self.unproject_pixels(np.stack([u.ravel(), v.ravel()], axis=1)))
+        return azimuth.reshape(u.shape), elevation.reshape(u.shape)
+
+
 @dataclass(frozen=True)
-class PinholeCamera:
+class PinholeCamera(_Angles):
     """``plumb_bob`` (d = k1, k2, p1, p2, k3) or ``rational_polynomial`` (d = k1, k2, p1, p2,
     k3, k4, k5, k6): OpenCV's pinhole model with radial and tangential distortion."""
 
@@ -131,6 +161,11 @@ class PinholeCamera:
                 da = (j22 * ex - j12 * ey) / det
                 db = (-j21 * ex + j11 * ey) / det
             a, b = a - da, b - db
+            # Stay on this side of the fold: beyond it the same pixel has a second preimage.
+            r = np.hypot(a, b)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                shrink = np.where(r > self.max_tan, self.max_tan / r, 1.0)
+            a, b = a * shrink, b * shrink
             if np.nanmax(np.abs(np.concatenate([da, db])), initial=0.0) < 1e-13:
                 break
         optical = np.stack([a, b, np.ones_like(a)], axis=1)
@@ -138,7 +173,7 @@ class PinholeCamera:
 
 
 @dataclass(frozen=True)
-class FisheyeCamera:
+class FisheyeCamera(_Angles):
     """``equidistant`` (d = k1, k2, k3, k4): OpenCV's fisheye (Kannala-Brandt) model. The angle
     off the optical axis is taken with atan2, so rays beyond 90 degrees from it project too."""
 

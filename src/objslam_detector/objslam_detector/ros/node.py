@@ -28,7 +28,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel
 from objslam_common.catalog import load_catalog
 from objslam_common.errors import CameraModelError
 from objslam_common.records import ImageSlices, SliceMeasurement
@@ -38,7 +38,7 @@ from objslam_common.ros.spin import run_node
 from objslam_detector.config import DetectorConfig
 from objslam_detector.detector import Detector
 from objslam_detector.errors import DetectorInputError
-from objslam_detector.images import decode_image_message, detector_camera
+from objslam_detector.images import decode_image_message
 from objslam_detector.overlay import draw_slices
 from objslam_msgs.msg import SliceArray
 
@@ -57,7 +57,7 @@ class DetectorNode(Node):
         catalog = load_catalog(self.config.catalog_file or None)
         self.detector = Detector(self.config, catalog)
         self.class_rgb = {c.label: c.color_rgb for c in catalog}
-        self.camera: UnifiedCamera | None = None
+        self.camera: CameraModel | None = None
         self.skipped: Counter[str] = Counter()  # reason -> frames skipped
         self.processed = 0
         self._frames_seen = 0
@@ -103,7 +103,7 @@ class DetectorNode(Node):
 
     def on_camera_info(self, msg: CameraInfo) -> None:
         try:
-            camera = detector_camera(camera_from_info(msg))
+            camera = camera_from_info(msg)
         except CameraModelError as exc:
             self.get_logger().warn(f"ignoring camera info: {exc}", throttle_duration_sec=WARN_PERIOD_S)
             return

@@ -55,6 +55,7 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -64,12 +65,48 @@ from objslam_mapper.config import DetectionConfig
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, WIDTH, predict_reduced
 
+# A gap this wide in the bearings of every slice means the camera does not see all around
+# (a perspective or fisheye camera): its view is the rest.
+LIMITED_VIEW_GAP_RAD = math.pi / 2
 
-def view_top_elevation(problem: GraphProblem, config: DetectionConfig) -> float:
-    """The top of the camera's view (rad), from the slices' upper edges."""
+
+class View(NamedTuple):
+    """What the camera sees, read off the data (no camera model in the mapper): elevations
+    from ``bottom_rad`` to ``top_rad``, bearings from ``azimuth_lo_rad`` over ``azimuth_span_rad``
+    (counter-clockwise; 2 pi: all around)."""
+
+    top_rad: float
+    bottom_rad: float = -math.inf
+    azimuth_lo_rad: float = -math.pi
+    azimuth_span_rad: float = 2.0 * math.pi
+
+    @property
+    def all_around(self) -> bool:
+        return self.azimuth_span_rad >= 2.0 * math.pi
+
+
+EVERYWHERE = View(math.inf)
+
+
+def camera_view(problem: GraphProblem, config: DetectionConfig) -> View:
+    """The camera's :class:`View` from the slices: its top is the ``view_top_quantile`` of
+    their upper edges (a slice cut by the view's edge ends there). If their left and right
+    edges leave a gap wider than LIMITED_VIEW_GAP_RAD, the camera looks one way: its
+    bearings are the rest, and its bottom is the other quantile of their lower edges. An
+    omnidirectional camera leaves no such gap where objects stand all around; where they do
+    not, the view only stops counting misses of things no slice was ever near."""
     if problem.measurement_count == 0:
-        return math.inf
-    return float(np.quantile(problem.measurements[:, 3], config.view_top_quantile))
+        return EVERYWHERE
+    m = problem.measurements
+    top = float(np.quantile(m[:, 3], config.view_top_quantile))
+    edges = np.sort(np.mod(np.concatenate([m[:, 0] - 0.5 * m[:, 1], m[:, 0] + 0.5 * m[:, 1]]) + math.pi, 2 * math.pi))
+    gaps = np.diff(np.concatenate([edges, edges[:1] + 2 * math.pi]))
+    widest = int(np.argmax(gaps))
+    if gaps[widest] < LIMITED_VIEW_GAP_RAD:
+        return View(top)
+    lo = float(wrap_angle(edges[(widest + 1) % len(edges)] - math.pi))
+    bottom = float(np.quantile(m[:, 2], 1.0 - config.view_top_quantile))
+    return View(top, bottom, lo, float(2 * math.pi - gaps[widest]))
 
 
 @dataclass(frozen=True)
@@ -99,9 +136,11 @@ def sight(
     map_T_base: NDArray[np.float64],
     things: NDArray[np.float64],
     config: DetectionConfig,
-    view_top_rad: float,
+    view: View,
 ) -> Sight:
-    """The :class:`Sight` of (K, 5) things (x, y, z_base, diameter, height) from the poses."""
+    """The :class:`Sight` of (K, 5) things (x, y, z_base, diameter, height) from the poses:
+    in view where the whole bearing interval is within the view's and the thing reaches
+    into its elevations."""
     things = np.asarray(things, dtype=float).reshape(-1, 5)
     poses = np.asarray(map_T_base, dtype=float)
     n, k = len(poses), len(things)
@@ -118,9 +157,15 @@ def sight(
     values = pred.values.reshape(4, n, k)
     dist = pred.range_m.reshape(n, k)
     in_view = pred.valid.reshape(n, k) & (values[WIDTH] >= config.min_angular_width_rad)
-    in_view &= (dist <= config.max_range_m) & (values[ELEVATION_BOTTOM] < view_top_rad)
+    in_view &= (dist <= config.max_range_m) & (values[ELEVATION_BOTTOM] < view.top_rad)
+    if not view.all_around:
+        offset = np.mod(values[BEARING] - view.azimuth_lo_rad, 2 * math.pi)
+        half = 0.5 * values[WIDTH]
+        in_view &= (
+            (offset >= half) & (offset + half <= view.azimuth_span_rad) & (values[ELEVATION_TOP] > view.bottom_rad)
+        )
     # What the camera can see of a thing ends at the top of the view.
-    top = np.minimum(values[ELEVATION_TOP], view_top_rad)
+    top = np.minimum(values[ELEVATION_TOP], view.top_rad)
     return Sight(values[BEARING], values[WIDTH], values[ELEVATION_BOTTOM], top, dist, in_view)
 
 
@@ -140,7 +185,7 @@ def table_sight(
     tables[:, :2] = things[:, :2]
     tables[:, 3] = np.maximum(config.table_diameter_m, things[:, 3])
     tables[:, 4] = things[:, 2]
-    seen = sight(problem, map_T_base, tables, config, math.inf)
+    seen = sight(problem, map_T_base, tables, config, EVERYWHERE)
     absent = ~np.asarray(on_table, dtype=bool) | (config.table_diameter_m <= 0.0)
     return dataclasses.replace(
         seen,
@@ -238,13 +283,13 @@ def sightings(
     things: NDArray[np.float64],
     groups: Sequence[NDArray[np.int64]],
     config: DetectionConfig,
-    view_top_rad: float,
+    view: View,
     *,
     on_table: NDArray[np.bool_] | None = None,
 ) -> Sightings:
     """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices);
     ``on_table`` (K,) says which stand on a table (default: none)."""
-    seen = sight(problem, map_T_base, things, config, view_top_rad)
+    seen = sight(problem, map_T_base, things, config, view)
     k = seen.bearing.shape[1]
     tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
     covered = hidden(seen, Sight.join([seen, tables]), config)
@@ -262,7 +307,7 @@ def detection_log_likelihood(
     things: NDArray[np.float64],
     groups: Sequence[NDArray[np.int64]],
     config: DetectionConfig,
-    view_top_rad: float,
+    view: View,
     *,
     on_table: NDArray[np.bool_] | None = None,
 ) -> float:
@@ -270,5 +315,5 @@ def detection_log_likelihood(
     (measurement indices; module docstring), ``on_table`` as for :func:`sightings`."""
     if not config.enabled or not len(groups):
         return 0.0
-    seen = sightings(problem, map_T_base, things, groups, config, view_top_rad, on_table=on_table)
+    seen = sightings(problem, map_T_base, things, groups, config, view, on_table=on_table)
     return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), config)

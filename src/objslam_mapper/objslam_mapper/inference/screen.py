@@ -149,7 +149,7 @@ class ProposalScreen:
         if gained:
             gained_estimates = np.array([self._conditional(state, g)[1] for g in gained])
             gained_members = [self.target.measurements(g) for g in gained]
-            fresh = sight(self.target.problem, poses, gained_estimates, self.target.detection, self.target.view_top_rad)
+            fresh = sight(self.target.problem, poses, gained_estimates, self.target.detection, self.target.view)
             fresh_tables = table_sight(
                 self.target.problem,
                 poses,

@@ -47,7 +47,7 @@ from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component
-from objslam_mapper.inference.detection import Sightings, miss_count_log_likelihood, sightings, view_top_elevation
+from objslam_mapper.inference.detection import Sightings, camera_view, miss_count_log_likelihood, sightings
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.exclusion import no_overlap_log_probability
 from objslam_mapper.inference.tracklets import Tracklet
@@ -117,7 +117,7 @@ class AssociationTarget:
         self.work = work or Work()
         self.clutter = ClutterModel(problem, options.clutter)
         self.detection = options.detection
-        self.view_top_rad = view_top_elevation(problem, self.detection)
+        self.view = camera_view(problem, self.detection)
         self.problem = self.clutter.problem  # with the distractors' prior rows
         self.estimation_problem = dataclasses.replace(self.problem, measurement_censored_top=censored_top)
         self.tracklets = list(tracklets)
@@ -253,9 +253,7 @@ class AssociationTarget:
         groups = self.graph_groups(state)
         members = [self.measurements(g) for g in groups]
         on_table = self.on_table(groups, members)
-        seen = sightings(
-            self.problem, map_T_base, estimates, members, self.detection, self.view_top_rad, on_table=on_table
-        )
+        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view, on_table=on_table)
         self._sights[state] = (map_T_base, seen)
         if len(self._sights) > SIGHTINGS_CACHE_SIZE:
             self._sights.popitem(last=False)

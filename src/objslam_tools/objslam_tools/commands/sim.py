@@ -34,16 +34,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="jpeg",
         help="encoding of compressed images (default jpeg)",
     )
+    parser.add_argument(
+        "--camera",
+        choices=("omni", "pinhole", "fisheye"),
+        default="omni",
+        help="omni (the bundled unified camera, default), pinhole (640x480 plumb_bob, about 90 degrees "
+        "across) or fisheye (640x640 equidistant, about 180 degrees)",
+    )
     parser.add_argument("--jpeg-quality", type=int, default=90, help="JPEG quality 1..100 (default 90)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from objslam_common.cameras import PRESET_CAMERAS
     from objslam_tools.progress import StderrProgress
     from objslam_tools.sim.scenarios import build_scenario
     from objslam_tools.sim.writer import write_bag
 
-    scenario = build_scenario(args.scenario, seed=args.seed, frames=args.frames)
+    scenario = build_scenario(args.scenario, seed=args.seed, frames=args.frames, camera=PRESET_CAMERAS[args.camera])
     summary = write_bag(
         scenario,
         args.out,

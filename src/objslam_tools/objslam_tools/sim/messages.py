@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 from rosbags.typesys import Stores, get_typestore
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel, camera_info_fields
 from objslam_common.geometry import quaternion_from_yaw
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -64,16 +64,17 @@ def compressed_image(stamp_ns: int, data: NDArray[np.uint8], image_format: str) 
     return _T[COMPRESSED_IMAGE](header=_header(stamp_ns, CAMERA_FRAME), format=image_format, data=data)
 
 
-def camera_info(stamp_ns: int, camera: UnifiedCamera) -> Any:
-    """CameraInfo of the unified model: distortion_model "unified", d = [xi]."""
+def camera_info(stamp_ns: int, camera: CameraModel) -> Any:
+    """CameraInfo of a camera model (unified: d = [xi]; the others their coefficients)."""
+    model, d = camera_info_fields(camera)
     k = [camera.fx, 0.0, camera.cx, 0.0, camera.fy, camera.cy, 0.0, 0.0, 1.0]
     p = [camera.fx, 0.0, camera.cx, 0.0, 0.0, camera.fy, camera.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
     return _T[CAMERA_INFO](
         header=_header(stamp_ns, CAMERA_FRAME),
         height=camera.height_px,
         width=camera.width_px,
-        distortion_model="unified",
-        d=np.array([camera.xi], dtype=np.float64),
+        distortion_model=model,
+        d=np.array(d, dtype=np.float64),
         k=np.array(k, dtype=np.float64),
         r=np.eye(3).reshape(-1),
         p=np.array(p, dtype=np.float64),

@@ -1,7 +1,8 @@
-"""Ray-casting renderer for the omnidirectional camera (unified model, docs/design.md).
+"""Ray-casting renderer for any camera model (docs/design.md, "Cameras and the mount").
 
-Every pixel inside the image circle gets one ray, computed once per camera by
-``UnifiedCamera.unproject``. Rays are kept sorted by their azimuth in the camera frame,
+Every pixel that sees something (inside the omnidirectional image circle; every pixel of a
+perspective or fisheye image within its field of view) gets one ray, computed once per
+camera by the model's ``unproject``. Rays are kept sorted by their azimuth in the camera frame,
 so the rays that can hit a cylinder or a rectangle form one or two contiguous slices of
 that order: each thing in the scene is intersected analytically with just the rays of
 its azimuth interval, and the nearest hit wins (occlusion). The room (floor, walls,
@@ -18,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
+from objslam_common.cameras import DEFAULT_CAMERA, CameraModel, UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_common.mount import CameraMount
 from objslam_tools.sim.scene import POST_RGB, SIGN_POST_RADIUS_M, TABLE_RGB, Scene
@@ -133,7 +134,7 @@ class Renderer:
 
     def __init__(
         self,
-        camera: UnifiedCamera = DEFAULT_CAMERA,
+        camera: CameraModel = DEFAULT_CAMERA,
         mount: CameraMount | None = None,
         circle_radius_px: float | None = None,
     ) -> None:
@@ -141,13 +142,19 @@ class Renderer:
         self.mount = mount or CameraMount()
         h, w = camera.height_px, camera.width_px
         v, u = np.mgrid[0:h, 0:w].astype(float)
-        if circle_radius_px is None:
-            circle_radius_px = min(camera.cx, camera.cy, w - 1 - camera.cx, h - 1 - camera.cy)
         azimuth, elevation = camera.unproject(u, v)
-        # Directions at the model's maximum elevation are degenerate; the image circle hides them anyway.
-        inside = (np.hypot(u - camera.cx, v - camera.cy) <= circle_radius_px) & (
-            elevation < camera.max_elevation_rad - 1e-3
-        )
+        if isinstance(camera, UnifiedCamera):
+            if circle_radius_px is None:
+                circle_radius_px = min(camera.cx, camera.cy, w - 1 - camera.cx, h - 1 - camera.cy)
+            # Directions at the model's maximum elevation are degenerate; the image circle hides them anyway.
+            inside = (np.hypot(u - camera.cx, v - camera.cy) <= circle_radius_px) & (
+                elevation < camera.max_elevation_rad - 1e-3
+            )
+        else:
+            # A pixel beyond the fold of the distortion has no ray (its unprojection does not
+            # come back to it): left black, as the lens's vignetted corners are.
+            back_u, back_v = camera.project(azimuth, elevation)
+            inside = np.isfinite(back_u) & (np.hypot(back_u - u, back_v - v) < 0.01)
         pixels = np.flatnonzero(inside.ravel())
         azimuth = np.asarray(azimuth).ravel()[pixels]
         elevation = np.asarray(elevation).ravel()[pixels]
@@ -351,7 +358,7 @@ class Renderer:
 
 
 @functools.lru_cache(maxsize=4)
-def renderer_for(camera: UnifiedCamera, mount: CameraMount) -> Renderer:
+def renderer_for(camera: CameraModel, mount: CameraMount) -> Renderer:
     """A shared renderer per (camera, mount): its ray table costs ~0.2 s to build."""
     return Renderer(camera, mount)
 
@@ -359,7 +366,7 @@ def renderer_for(camera: UnifiedCamera, mount: CameraMount) -> Renderer:
 def render_frame(
     scene: Scene,
     map_T_base: NDArray[np.float64],
-    camera: UnifiedCamera = DEFAULT_CAMERA,
+    camera: CameraModel = DEFAULT_CAMERA,
     mount: CameraMount | None = None,
     rng: np.random.Generator | None = None,
 ) -> NDArray[np.uint8]:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
+from objslam_common.cameras import DEFAULT_CAMERA, CameraModel, camera_info_fields
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.mount import CameraMount
 from objslam_tools.errors import UserError
@@ -54,7 +54,7 @@ class Scenario:
     seed: int
     description: str
     scene: Scene
-    camera: UnifiedCamera
+    camera: CameraModel
     mount: CameraMount
     path: SmoothPath
     image_stamps_ns: NDArray[np.int64]
@@ -89,9 +89,10 @@ class Scenario:
             "initial_pose": [round(float(v), 6) for v in self.true_poses[0]],
             "odometry_noise": self.odometry_noise.as_dict(),
             "camera": {
+                "distortion_model": camera_info_fields(self.camera)[0],
+                "d": list(camera_info_fields(self.camera)[1]),
                 "width": self.camera.width_px,
                 "height": self.camera.height_px,
-                "xi": self.camera.xi,
                 "fx": self.camera.fx,
                 "fy": self.camera.fy,
                 "cx": self.camera.cx,
@@ -375,7 +376,7 @@ def build_scenario(
     frames: int | None = None,
     *,
     catalog: Catalog | None = None,
-    camera: UnifiedCamera = DEFAULT_CAMERA,
+    camera: CameraModel = DEFAULT_CAMERA,
     mount: CameraMount | None = None,
     odometry_noise: OdometryNoise | None = None,
 ) -> Scenario:
