@@ -23,10 +23,10 @@ def _run(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """office, 100 frames, seen by each of the two cameras."""
+    """office, 80 frames, seen by each of the two cameras."""
     out = tmp_path_factory.mktemp("cameras")
     for camera in ("pinhole", "fisheye"):
-        _run("sim", "office", "--camera", camera, "--frames", "100", "--out", str(out / camera))
+        _run("sim", "office", "--camera", camera, "--frames", "80", "--out", str(out / camera))
     return out
 
 

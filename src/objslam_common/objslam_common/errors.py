@@ -12,7 +12,14 @@ class ObjslamError(Exception):
 
 
 class ConfigError(ObjslamError, ValueError):
-    """A configuration file or value that cannot be used."""
+    """A configuration file or value that cannot be used.
+
+    Its message quotes what the file holds (a key may hold a line break): line breaks are
+    escaped, so that the error stays the one line the command prints.
+    """
+
+    def __init__(self, message: str = "") -> None:
+        super().__init__(str(message).replace("\r", "\\r").replace("\n", "\\n"))
 
 
 class RecordError(ObjslamError, ValueError):

@@ -56,12 +56,12 @@ def run(args: argparse.Namespace) -> int:
     nodes = [mapper, subprocess.Popen(_cli("detector", "--ros-args", "-p", "reliable_images:=true"), **quiet)]  # type: ignore[call-overload]
     rows = []
     try:
-        time.sleep(5.0)  # discovery
+        time.sleep(3.0)  # discovery
         nodes.append(subprocess.Popen(_cli("play", str(bag.path), "--loop"), **quiet))  # type: ignore[call-overload]
         started = time.monotonic()
         for lap in range(1, args.laps + 1):
-            # Build three quarters into each lap: most of it buffered, the loop not yet back.
-            time.sleep(max(0.0, started + (lap - 0.25) * lap_s - time.monotonic()))
+            # Build two thirds into each lap: most of it buffered, the loop not yet back.
+            time.sleep(max(0.0, started + (lap - 1 / 3) * lap_s - time.monotonic()))
             t0 = time.monotonic()
             request = ["--samples", str(args.samples), "--burn-in", str(args.burn_in), "--timeout", "600"]
             call = subprocess.run(
