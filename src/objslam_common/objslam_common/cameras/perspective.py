@@ -37,16 +37,6 @@ _NEWTON_STEPS = 30
 _FOLD_SAMPLES = 20_000
 
 
-def _check_intrinsics(model: str, width_px: int, height_px: int, k: tuple[float, ...], d: tuple[float, ...]) -> None:
-    if width_px <= 0 or height_px <= 0:
-        raise CameraModelError(f"{model}: image size must be positive, got {width_px}x{height_px}")
-    if not all(math.isfinite(v) for v in (*k, *d)):
-        raise CameraModelError(f"{model}: calibration values must be finite, got k={list(k)}, d={list(d)}")
-    fx, fy = k
-    if fx <= 0.0 or fy <= 0.0:
-        raise CameraModelError(f"{model}: focal lengths must be positive, got fx={fx}, fy={fy}")
-
-
 def _first_fold(radial_map, limit: float) -> float:
     """The largest t in (0, limit] up to which ``radial_map(t)`` strictly grows."""
     t = np.linspace(0.0, limit, _FOLD_SAMPLES)
@@ -56,9 +46,41 @@ def _first_fold(radial_map, limit: float) -> float:
     return float(t[int(np.argmin(grows))])
 
 
-class _Angles:
-    """Azimuth/elevation access to a ray model, the interface the detector's panorama, its
-    overlay and the renderer use (as :class:`UnifiedCamera` has it)."""
+@dataclass(frozen=True)
+class _Lens:
+    """What the perspective and fisheye models share: the image size, ``K`` and ``d`` of
+    the CameraInfo, the pixel <-> normalized-coordinate step, and azimuth/elevation access
+    to the rays, the interface the detector's panorama, its overlay and the renderer use (as
+    :class:`UnifiedCamera` has it)."""
+
+    width_px: int
+    height_px: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    d: tuple[float, ...]
+
+    def _check(self, model: str, d_length: int) -> None:
+        if len(self.d) != d_length:
+            raise CameraModelError(f"{model}: d must hold {d_length} coefficients, got {len(self.d)}")
+        if self.width_px <= 0 or self.height_px <= 0:
+            raise CameraModelError(f"{model}: image size must be positive, got {self.width_px}x{self.height_px}")
+        if not all(math.isfinite(v) for v in (self.fx, self.fy, *self.d)):
+            raise CameraModelError(
+                f"{model}: calibration values must be finite, got k={[self.fx, self.fy]}, d={list(self.d)}"
+            )
+        if self.fx <= 0.0 or self.fy <= 0.0:
+            raise CameraModelError(f"{model}: focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+
+    def _pixels(self, x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(N, 2) pixels of distorted normalized coordinates."""
+        return np.stack([self.fx * x + self.cx, self.fy * y + self.cy], axis=1)
+
+    def _normalized(self, uv: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Distorted normalized coordinates of (N, 2) pixels."""
+        p = np.atleast_2d(np.asarray(uv, dtype=float))
+        return (p[:, 0] - self.cx) / self.fx, (p[:, 1] - self.cy) / self.fy
 
     def project_rays(self, rays: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         raise NotImplementedError
@@ -81,18 +103,11 @@ class _Angles:
 
 
 @dataclass(frozen=True)
-class PinholeCamera(_Angles):
+class PinholeCamera(_Lens):
     """``plumb_bob`` (d = k1, k2, p1, p2, k3) or ``rational_polynomial`` (d = k1, k2, p1, p2,
     k3, k4, k5, k6): OpenCV's pinhole model with radial and tangential distortion."""
 
     distortion_model: str
-    width_px: int
-    height_px: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    d: tuple[float, ...]
     max_tan: float = field(init=False, repr=False, compare=False)  # edge of the field of view
 
     D_LENGTHS: ClassVar[dict[str, int]] = {"plumb_bob": 5, "rational_polynomial": 8}
@@ -101,9 +116,7 @@ class PinholeCamera(_Angles):
         expected = self.D_LENGTHS.get(self.distortion_model)
         if expected is None:
             raise CameraModelError(f"PinholeCamera takes {' or '.join(self.D_LENGTHS)}, got {self.distortion_model!r}")
-        if len(self.d) != expected:
-            raise CameraModelError(f"{self.distortion_model}: d must hold {expected} coefficients, got {len(self.d)}")
-        _check_intrinsics(self.distortion_model, self.width_px, self.height_px, (self.fx, self.fy), self.d)
+        self._check(self.distortion_model, expected)
         # Beyond this tangent of the angle off the axis the radial mapping folds back (module
         # docstring); 10 is ~84 degrees, past any real perspective lens.
         object.__setattr__(self, "max_tan", _first_fold(lambda r: r * self._radial(r * r), 10.0))
@@ -136,13 +149,11 @@ class PinholeCamera(_Angles):
             a, b = optical[:, 0] / z, optical[:, 1] / z
             valid = (z > 1e-12) & (np.hypot(a, b) < self.max_tan)
         a, b = np.where(valid, a, np.nan), np.where(valid, b, np.nan)
-        x, y = self._distort(a, b)
-        return np.stack([self.fx * x + self.cx, self.fy * y + self.cy], axis=1), valid
+        return self._pixels(*self._distort(a, b)), valid
 
     def unproject_pixels(self, uv: ArrayLike) -> NDArray[np.float64]:
         """(N, 3) unit camera-frame rays seen at pixels (u, v): Newton's method on the distortion."""
-        p = np.atleast_2d(np.asarray(uv, dtype=float))
-        x_d, y_d = (p[:, 0] - self.cx) / self.fx, (p[:, 1] - self.cy) / self.fy
+        x_d, y_d = self._normalized(uv)
         a, b = x_d.copy(), y_d.copy()
         eps = 1e-7
         for _ in range(_NEWTON_STEPS):
@@ -173,25 +184,16 @@ class PinholeCamera(_Angles):
 
 
 @dataclass(frozen=True)
-class FisheyeCamera(_Angles):
+class FisheyeCamera(_Lens):
     """``equidistant`` (d = k1, k2, k3, k4): OpenCV's fisheye (Kannala-Brandt) model. The angle
     off the optical axis is taken with atan2, so rays beyond 90 degrees from it project too."""
 
-    width_px: int
-    height_px: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    d: tuple[float, ...]
     max_theta: float = field(init=False, repr=False, compare=False)  # edge of the field of view, rad
 
     distortion_model: ClassVar[str] = "equidistant"
 
     def __post_init__(self) -> None:
-        if len(self.d) != 4:
-            raise CameraModelError(f"equidistant: d must hold 4 coefficients, got {len(self.d)}")
-        _check_intrinsics("equidistant", self.width_px, self.height_px, (self.fx, self.fy), self.d)
+        self._check("equidistant", 4)
         object.__setattr__(self, "max_theta", _first_fold(self._theta_d, math.pi))
 
     def _theta_d(self, theta: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -208,13 +210,11 @@ class FisheyeCamera(_Angles):
         with np.errstate(divide="ignore", invalid="ignore"):
             scale = np.where(rho > 1e-15, self._theta_d(theta) / rho, 1.0)  # on the axis: theta_d/rho -> 1/z
         scale = np.where(valid, scale, np.nan)
-        x, y = scale * optical[:, 0], scale * optical[:, 1]
-        return np.stack([self.fx * x + self.cx, self.fy * y + self.cy], axis=1), valid
+        return self._pixels(scale * optical[:, 0], scale * optical[:, 1]), valid
 
     def unproject_pixels(self, uv: ArrayLike) -> NDArray[np.float64]:
         """(N, 3) unit camera-frame rays seen at pixels (u, v): Newton's method on theta_d(theta)."""
-        p = np.atleast_2d(np.asarray(uv, dtype=float))
-        x, y = (p[:, 0] - self.cx) / self.fx, (p[:, 1] - self.cy) / self.fy
+        x, y = self._normalized(uv)
         theta_d = np.hypot(x, y)
         theta = np.minimum(theta_d, self.max_theta)
         k1, k2, k3, k4 = self.d
