@@ -39,8 +39,12 @@ class MapperInputs(NamedTuple):
 
     def skipped_summary(self) -> str:
         """The skipped messages and frames in words ('' if none)."""
-        frames = ", ".join(f"{n} frames ({reason})" for reason, n in sorted(self.skipped_frames.items()))
-        return ", ".join(part for part in (self.counters.describe(), frames) if part)
+        return _skipped_words(self.counters, self.skipped_frames)
+
+
+def _skipped_words(counters: BufferCounters, skipped_frames: dict[str, int]) -> str:
+    frames = ", ".join(f"{n} frames ({reason})" for reason, n in sorted(skipped_frames.items()))
+    return ", ".join(part for part in (counters.describe(), frames) if part)
 
 
 def read_mapper_inputs(
@@ -58,7 +62,7 @@ def read_mapper_inputs(
     try:
         odometry, kept = buffer.snapshot()
     except NothingToBuildError as exc:
-        counts = MapperInputs((), (), buffer.counters, dict(skipped)).skipped_summary()
+        counts = _skipped_words(buffer.counters, dict(skipped))
         raise UserError(f"bag {bag.path}: nothing to map: {exc}" + (f" (skipped: {counts})" if counts else "")) from exc
     return MapperInputs(odometry, kept, buffer.counters, dict(skipped))
 
