@@ -11,6 +11,7 @@ import pytest
 
 from objslam_common.cameras import PRESET_CAMERAS, FisheyeCamera, PinholeCamera
 from objslam_tools.bag import open_bag
+from objslam_tools.ground_truth import load_ground_truth
 from objslam_tools.sim.render import Renderer
 from tests.conftest import objslam_cmd
 
@@ -37,6 +38,12 @@ def test_a_rendered_bag_carries_its_camera_and_the_detector_measures_it(rendered
     bag = open_bag(rendered / camera)
     read = bag.read_camera()
     assert isinstance(read, kind) and read.distortion_model == model and read == PRESET_CAMERAS[camera]
+    # The mount, pitched down, is in /tf_static and in ground_truth.yaml alike.
+    mount = bag.read_mount().mount
+    truth = load_ground_truth(bag.directory).mount
+    assert mount.pitch_rad == pytest.approx(0.1) and truth.pitch_rad == pytest.approx(0.1)
+    for name in ("height_m", "offset_x_m", "offset_y_m", "yaw_rad", "roll_rad", "pitch_rad"):
+        assert getattr(mount, name) == pytest.approx(getattr(truth, name), abs=1e-9), name
     report = json.loads(_run("eval-detector", str(bag.path), "--every", "5", "--json").stdout)
     overall = report["overall"]
     assert overall["recall"] >= 0.9

@@ -244,4 +244,6 @@ def test_load_ground_truth_errors_are_one_clear_line(tmp_path, content, message)
 def test_ground_truth_defaults() -> None:
     gt = ground_truth_from_dict({"objects": [{"label": "red", "position": [1, 2, 0], "size": [0.3, 0.6]}]})
     assert isinstance(gt, GroundTruth) and gt.objects[0].id == 0 and gt.tables == () and gt.room is None
-    assert dataclasses.asdict(gt.mount) == {"height_m": 0.5, "offset_x_m": 0.0, "offset_y_m": 0.0, "yaw_rad": 0.0}
+    assert dataclasses.asdict(gt.mount) == {
+        "height_m": 0.5, "offset_x_m": 0.0, "offset_y_m": 0.0, "yaw_rad": 0.0, "roll_rad": 0.0, "pitch_rad": 0.0,
+    }  # fmt: skip

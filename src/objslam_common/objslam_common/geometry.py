@@ -101,6 +101,37 @@ def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
     return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
 
 
+def rpy_from_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (rad, ROS fixed axes: R = Rz(yaw) Ry(pitch) Rx(roll)) of a unit quaternion."""
+    roll = float(np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y)))
+    pitch = float(np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0)))
+    return roll, pitch, yaw_from_quaternion(x, y, z, w)
+
+
+def quaternion_from_rpy(roll_rad: float, pitch_rad: float, yaw_rad: float) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of ROS fixed-axis roll, pitch, yaw (the inverse of :func:`rpy_from_quaternion`)."""
+    cr, sr = np.cos(roll_rad / 2.0), np.sin(roll_rad / 2.0)
+    cp, sp = np.cos(pitch_rad / 2.0), np.sin(pitch_rad / 2.0)
+    cy, sy = np.cos(yaw_rad / 2.0), np.sin(yaw_rad / 2.0)
+    return (
+        float(sr * cp * cy - cr * sp * sy),
+        float(cr * sp * cy + sr * cp * sy),
+        float(cr * cp * sy - sr * sp * cy),
+        float(cr * cp * cy + sr * sp * sy),
+    )
+
+
+def rotation_from_rpy(roll_rad: float, pitch_rad: float, yaw_rad: float = 0.0) -> NDArray[np.float64]:
+    """3x3 rotation Rz(yaw) Ry(pitch) Rx(roll): positive pitch tilts the x axis down."""
+    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    cy, sy = np.cos(yaw_rad), np.sin(yaw_rad)
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    return rz @ ry @ rx
+
+
 def quaternion_from_yaw(yaw_rad: float) -> tuple[float, float, float, float]:
     """Unit quaternion (x, y, z, w) of a rotation about z."""
     return (0.0, 0.0, float(np.sin(yaw_rad / 2.0)), float(np.cos(yaw_rad / 2.0)))

@@ -1,8 +1,10 @@
 """Where the camera sits on the robot: its pose on ``base_link``.
 
-Today the mount is planar (an offset from the rotation axis and a yaw) plus a height:
-the camera's horizontal plane is level. :class:`CameraMountConfig` is its one
-definition as settings, shared by the detector and the mapper.
+The mount is an offset from the rotation axis, a height, and roll, pitch and yaw (ROS fixed
+axes). The detector takes roll and pitch out of its directions (it measures in the camera's
+level frame, :mod:`objslam_common.cameras.tilted`), so the mapper's slice model needs only
+the planar pose, the height and the yaw. :class:`CameraMountConfig` is its one definition as
+settings, shared by the detector and the mapper.
 """
 
 from __future__ import annotations
@@ -12,21 +14,28 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from objslam_common.cameras import CameraModel, level_view
 from objslam_common.config import setting
 from objslam_common.geometry import rotation, wrap_angle
 
 
 @dataclass(frozen=True)
 class CameraMount:
-    """Where the camera sits on the robot: base_T_camera in the plane plus its height.
+    """Where the camera sits on the robot: base_T_camera (x, y, height; roll, pitch, yaw).
 
-    Default: on the robot's rotation axis, 0.5 m above the floor, looking forward.
+    Default: on the robot's rotation axis, 0.5 m above the floor, level, looking forward.
     """
 
     height_m: float = 0.5
     offset_x_m: float = 0.0
     offset_y_m: float = 0.0
     yaw_rad: float = 0.0
+    roll_rad: float = 0.0
+    pitch_rad: float = 0.0
+
+    def level_view(self, lens: CameraModel) -> CameraModel:
+        """``lens`` seen from the camera's level frame (the lens itself on a level mount)."""
+        return level_view(lens, self.roll_rad, self.pitch_rad)
 
     def camera_pose(self, map_T_base: ArrayLike) -> NDArray[np.float64]:
         """map_T_camera (x, y, yaw) of the camera for a robot pose map_T_base."""
@@ -86,8 +95,31 @@ class CameraMountConfig:
     offset_x_m: float = setting(0.0, "camera position ahead of the rotation axis (m)")
     offset_y_m: float = setting(0.0, "camera position left of the rotation axis (m)")
     yaw_rad: float = setting(0.0, "camera forward axis relative to the robot's (rad, counter-clockwise)")
+    roll_rad: float = setting(
+        0.0, "camera roll about its forward axis (rad, ROS fixed axes)", minimum=-1.6, maximum=1.6
+    )
+    pitch_rad: float = setting(
+        0.0, "camera pitch (rad, ROS fixed axes: positive tilts the forward axis down)", minimum=-1.6, maximum=1.6
+    )
 
     def to_mount(self) -> CameraMount:
         return CameraMount(
-            height_m=self.height_m, offset_x_m=self.offset_x_m, offset_y_m=self.offset_y_m, yaw_rad=self.yaw_rad
+            height_m=self.height_m,
+            offset_x_m=self.offset_x_m,
+            offset_y_m=self.offset_y_m,
+            yaw_rad=self.yaw_rad,
+            roll_rad=self.roll_rad,
+            pitch_rad=self.pitch_rad,
+        )
+
+    @classmethod
+    def of(cls, mount: CameraMount) -> CameraMountConfig:
+        """The settings of a mount."""
+        return cls(
+            height_m=mount.height_m,
+            offset_x_m=mount.offset_x_m,
+            offset_y_m=mount.offset_y_m,
+            yaw_rad=mount.yaw_rad,
+            roll_rad=mount.roll_rad,
+            pitch_rad=mount.pitch_rad,
         )

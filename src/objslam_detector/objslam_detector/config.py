@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from objslam_common.config import setting
+from objslam_common.mount import CameraMountConfig
 from objslam_detector.colors import parse_class_overrides
 
 
@@ -110,7 +111,14 @@ class DetectorConfig:
         "auto (whichever of IMAGE_TOPIC and IMAGE_TOPIC/compressed brings images first), "
         "raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage on IMAGE_TOPIC/compressed)",
     )
-    camera_info_topic: str = setting("/camera/camera_info", "calibration topic (sensor_msgs/CameraInfo, 'unified')")
+    camera_info_topic: str = setting(
+        "/camera/camera_info",
+        "calibration topic (sensor_msgs/CameraInfo: unified, plumb_bob, rational_polynomial or equidistant)",
+    )
+    camera_mount: CameraMountConfig = setting(
+        CameraMountConfig(),
+        "camera mount on the robot, the same as the mapper's (the detector uses its roll and pitch)",
+    )
     publish_debug_image: bool = setting(False, "publish the image with the slices drawn on it")
     reliable_images: bool = setting(
         False,

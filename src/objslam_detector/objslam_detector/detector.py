@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras import CameraModel, UnifiedCamera
+from objslam_common.cameras import CameraModel, UnifiedCamera, level_view
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.errors import ConfigError
 from objslam_common.records import SliceMeasurement
@@ -35,7 +35,7 @@ _BLACK = 8
 
 
 class Detector:
-    """Detects catalog classes in omnidirectional images.
+    """Detects catalog classes in images of any camera model and mount.
 
     Holds no per-image state, only the remap tables of the calibrations seen (built once
     per calibration), so one instance serves a whole image stream.
@@ -53,6 +53,12 @@ class Detector:
     def panorama(self, camera: CameraModel) -> Panorama:
         """Remap tables of a calibration, built on first use."""
         return self._for_camera(camera)[0]
+
+    def view(self, camera: CameraModel) -> CameraModel:
+        """The camera seen from its level frame (the mount's roll and pitch applied): the
+        frame the slices are measured in, and the model to draw them on the image with."""
+        mount = self.config.camera_mount
+        return level_view(camera, mount.roll_rad, mount.pitch_rad)
 
     def detect(self, image: NDArray, camera: CameraModel, encoding: str = "rgb8") -> list[SliceMeasurement]:
         """Slices of one image, in no particular order.
@@ -86,7 +92,7 @@ class Detector:
     def _for_camera(self, camera: CameraModel) -> tuple[Panorama, Segmenter]:
         entry = self._panoramas.get(camera)
         if entry is None:
-            pano = Panorama.build(camera, self.config.panorama)
+            pano = Panorama.build(self.view(camera), self.config.panorama)
             logger.debug("panorama %dx%d px for %s", pano.cols, pano.rows, camera)
             horizon_row = float(pano.row_of_elevation(0.0))
             entry = (pano, Segmenter(self.config.blobs, pano.azimuth_step_rad, pano.elevation_step_rad, horizon_row))

@@ -17,7 +17,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from objslam_common.cameras import CameraModel, UnifiedCamera
+from objslam_common.cameras import UnifiedCamera
 from objslam_common.geometry import wrap_angle
 from objslam_common.records import SliceMeasurement
 from objslam_detector.blobs import Blob, strip
@@ -174,7 +174,7 @@ def _quadratic_fit(x: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[floa
     return c0, c1, c2
 
 
-def image_angle(camera: CameraModel, azimuth_rad: float) -> float:
+def image_angle(camera: UnifiedCamera, azimuth_rad: float) -> float:
     """Angle in the image (counter-clockwise from +u, v up) where an azimuth appears; the azimuth if fx == fy."""
     return float(np.arctan2(camera.fy * np.sin(azimuth_rad), camera.fx * np.cos(azimuth_rad)))
 

@@ -6,6 +6,7 @@ import dataclasses
 from collections.abc import Sequence
 
 from objslam_common.catalog import Catalog
+from objslam_common.mount import CameraMountConfig
 from objslam_common.records import ImageSlices, OdometrySample
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.problem import build_problem
@@ -35,16 +36,19 @@ def build_maps(
     catalog: Catalog,
     progress: PhaseProgress | None = None,
     runner: ChainRunner | None = None,
+    mounts: Sequence[CameraMountConfig] | None = None,
 ) -> list[BuiltMap]:
     """The maps of several runs as one job: every chain of every run handed to ``runner`` at once
-    (on a cluster they all run side by side); each map is the one :func:`build_map` gives."""
+    (on a cluster they all run side by side); each map is the one :func:`build_map` gives.
+    ``mounts``: each run's camera mount (default: ``config.camera_mount`` for all)."""
+    mounts = mounts if mounts is not None else [config.camera_mount] * len(runs)
     prepared = [
         prepare(
-            build_problem(odometry, images, config.camera_mount.to_mount(), catalog, config.graph),
+            build_problem(odometry, images, mount.to_mount(), catalog, config.graph),
             config.sampler,
             progress,
         )
-        for odometry, images in runs
+        for (odometry, images), mount in zip(runs, mounts, strict=True)
     ]
     tasks = [task for inference in prepared for task in inference.tasks]
     outcomes = (runner or InProcess()).run(tasks, prepared[0].report_sampling if prepared else None)

@@ -9,6 +9,7 @@ classes stay inside this module. Usage::
         ...
     odom = bag.read_odometry()                  # PoseTrack: stamps_ns (N,) int64, poses (N, 3)
     camera = bag.read_camera()                  # an objslam_common.cameras model
+    mount = bag.read_mount()                    # MountReading from /tf_static, or None
     for frame in bag.images():                  # ImageFrame(stamp_ns, encoding, data)
         rgb = decode_rgb(frame)                 # (H, W, 3) uint8
 
@@ -35,7 +36,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from objslam_common.cameras import CameraModel
 from objslam_common.errors import CameraModelError
-from objslam_common.geometry import yaw_from_quaternion
+from objslam_common.geometry import rpy_from_quaternion, yaw_from_quaternion
+from objslam_common.mount import CameraMount
 from objslam_common.ros.conversions import camera_from_info
 from objslam_tools.errors import UserError
 from objslam_tools.trajectory import PoseTrack
@@ -47,11 +49,14 @@ GROUND_TRUTH_ODOM_TOPIC = "/ground_truth/odom"
 CAMERA_INFO_TOPIC = "/camera/camera_info"
 IMAGE_TOPIC = "/camera/image_raw"
 COMPRESSED_IMAGE_TOPIC = "/camera/image_raw/compressed"
+TF_STATIC_TOPIC = "/tf_static"
+BASE_FRAME = "base_link"
 
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 IMAGE_TYPE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE_TYPE = "sensor_msgs/msg/CompressedImage"
+TF_MESSAGE_TYPE = "tf2_msgs/msg/TFMessage"
 
 STORAGE_SUFFIXES = (".mcap", ".db3")
 _RAW_CHANNELS = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}
@@ -126,6 +131,13 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
+
+
+class MountReading(NamedTuple):
+    """The camera mount a bag carries on /tf_static, and where it came from."""
+
+    mount: CameraMount
+    source: str  # e.g. "/tf_static base_link -> camera"
 
 
 @dataclass(frozen=True)
@@ -227,6 +239,49 @@ class Bag:
             except CameraModelError as exc:
                 raise UserError(f"bag {self.path}: {topic}: {exc}") from exc
         raise UserError(f"bag {self.path}: topic {topic} has no messages")
+
+    def read_mount(self) -> MountReading | None:
+        """The mount (base_link -> camera) from /tf_static, or None if the bag has no /tf_static.
+
+        The transform taken is the one from ``base_link`` to the CameraInfo's frame; a bag
+        whose /tf_static holds exactly one transform from ``base_link`` may name its camera
+        frame otherwise. Anything else is one clear UserError: a mount guessed is a map wrong.
+        """
+        if not self.has_topic(TF_STATIC_TOPIC):
+            return None
+        camera_frame = self._camera_frame()
+        from_base = {}
+        for _, msg in self.typed_messages(TF_STATIC_TOPIC, TF_MESSAGE_TYPE):
+            for t in msg.transforms:
+                if t.header.frame_id.lstrip("/") == BASE_FRAME:
+                    from_base[t.child_frame_id.lstrip("/")] = t.transform
+        if camera_frame in from_base:
+            child = camera_frame
+        elif len(from_base) == 1:
+            (child,) = from_base
+        else:
+            found = ", ".join(sorted(from_base)) or "none"
+            raise UserError(
+                f"bag {self.path}: {TF_STATIC_TOPIC} has no transform {BASE_FRAME} -> {camera_frame!r} "
+                f"(the camera info's frame); transforms from {BASE_FRAME}: {found}"
+            )
+        tr, q = from_base[child].translation, from_base[child].rotation
+        values = [tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w]
+        norm = float(np.linalg.norm(values[3:]))
+        if not np.all(np.isfinite(values)) or abs(norm - 1.0) > 1e-3:
+            raise UserError(f"bag {self.path}: {TF_STATIC_TOPIC} {BASE_FRAME} -> {child}: not a valid transform")
+        roll, pitch, yaw = rpy_from_quaternion(*(v / norm for v in values[3:]))
+        mount = CameraMount(
+            height_m=float(tr.z), offset_x_m=float(tr.x), offset_y_m=float(tr.y),
+            yaw_rad=yaw, roll_rad=roll, pitch_rad=pitch,
+        )  # fmt: skip
+        return MountReading(mount, f"{TF_STATIC_TOPIC} {BASE_FRAME} -> {child}")
+
+    def _camera_frame(self) -> str:
+        topic = self._pick_topic([CAMERA_INFO_TOPIC], [CAMERA_INFO_TYPE], "camera info")
+        for _, msg in self.typed_messages(topic, CAMERA_INFO_TYPE):
+            return str(msg.header.frame_id).lstrip("/")
+        return ""
 
     def image_topic(self) -> str:
         """The camera image topic: /camera/image_raw, else its /compressed, else the only image topic."""

@@ -18,6 +18,7 @@ bearing, angular width (relative), lower and upper elevation.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -30,8 +31,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from objslam_common.cameras.unified import UnifiedCamera
+from objslam_common.cameras import CameraModel
 from objslam_common.geometry import wrap_angle
+from objslam_common.mount import CameraMountConfig
 from objslam_common.records import SliceMeasurement
 from objslam_detector import Detector, DetectorInputError, decode_compressed, draw_slices
 from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC, ImageFrame, open_bag
@@ -271,6 +273,11 @@ def evaluate_bag(
     bag = open_bag(bag_path)
     gt = load_ground_truth(bag.directory)
     camera = bag.read_camera()
+    # The detector measures in the level frame of the mount the bag was recorded with.
+    detector = Detector(
+        dataclasses.replace(detector.config, camera_mount=CameraMountConfig.of(gt.mount)), detector.catalog
+    )
+    view = detector.view(camera)
     track = bag.read_odometry(GROUND_TRUTH_ODOM_TOPIC) if bag.has_topic(GROUND_TRUTH_ODOM_TOPIC) else None
     if track is None:
         raise UserError(f"bag {bag_path} has no {GROUND_TRUTH_ODOM_TOPIC}: only simulated bags can be scored")
@@ -303,7 +310,7 @@ def evaluate_bag(
             continue
         evaluation.frames += 1
         pose = track.interpolate([frame.stamp_ns])[0]
-        objects = visible_objects(gt, pose, camera, min_elevation_rad=float(min_elevation))
+        objects = visible_objects(gt, pose, view, min_elevation_rad=float(min_elevation))
         distractors = [(d, *distractor_sector(d, gt, pose)) for d in gt.distractors]
         trouble = score_frame(slices, objects, distractors, evaluation, options)
         if trouble and overlay_dir is not None and overlays < max_overlays:
@@ -313,7 +320,7 @@ def evaluate_bag(
                 encoding,
                 slices,
                 objects,
-                camera=camera,
+                camera=view,
                 detector=detector,
             )
             overlays += 1
@@ -343,7 +350,7 @@ def save_overlay(
     slices: Sequence[SliceMeasurement],
     objects: Sequence[VisibleObject],
     *,
-    camera: UnifiedCamera,
+    camera: CameraModel,
     detector: Detector,
 ) -> None:
     """Detections in class colours, ground truth as thin white sectors."""

@@ -10,7 +10,10 @@ Procedure:
 2. Match objects per class: Hungarian assignment on xy distance (in the ground-truth
    frame) with a gate (default 0.5 m). Unmatched map objects are false positives, unmatched
    real objects misses. A false positive within the gate of a same-class distractor's
-   footprint is a "distractor that ended as an object".
+   footprint is a "distractor that ended as an object". Recall is reported twice: over all
+   real objects, and over the objects the camera saw (:mod:`objslam_tools.seen`: in view,
+   unhidden, in at least 10 images), which is what a camera that does not see all around
+   can be asked for.
 3. Errors of matched objects: xy distance, |z_base| error, diameter and height errors, and
    the NEES of the position using the map's ``position_covariance`` (rotated into the
    ground-truth frame). The mean NEES over n matches is compared with the two-sided 95 %
@@ -41,6 +44,7 @@ from objslam_mapper.map_file import BuiltMap, MappedObject
 from objslam_tools.bag import GROUND_TRUTH_ODOM_TOPIC, ODOM_TOPIC, open_bag
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import Distractor, GroundTruth, load_ground_truth
+from objslam_tools.seen import images_seen, seen_ids
 from objslam_tools.trajectory import PoseTrack, fit_se2, position_rmse, transform_poses
 
 logger = logging.getLogger(__name__)
@@ -57,6 +61,7 @@ class Reference:
     ground_truth_track: PoseTrack  # /ground_truth/odom
     odometry_track: PoseTrack | None = None  # /odom, for the raw odometry's ATE
     name: str = ""
+    images_seen: dict[int, int] | None = None  # per real object, the images that saw it (objslam_tools.seen)
 
 
 def load_reference(bag_path: str | Path) -> Reference:
@@ -67,7 +72,12 @@ def load_reference(bag_path: str | Path) -> Reference:
         raise UserError(f"bag {bag.path} has no {GROUND_TRUTH_ODOM_TOPIC}: cannot align a map to its ground truth")
     gt_track = bag.read_odometry(GROUND_TRUTH_ODOM_TOPIC)
     odom = bag.read_odometry(ODOM_TOPIC) if bag.has_topic(ODOM_TOPIC) else None
-    return Reference(truth, gt_track, odom, name=bag.path.name)
+    try:
+        seen = images_seen(bag, truth, gt_track)
+    except UserError as exc:  # no camera info or images: which objects were seen is not known
+        logger.info("recall over the objects the camera saw is not known: %s", exc)
+        seen = None
+    return Reference(truth, gt_track, odom, name=bag.path.name, images_seen=seen)
 
 
 @dataclass(frozen=True)
@@ -144,6 +154,7 @@ class Miss:
     label: str
     position_m: tuple[float, float, float]
     rejected_map_id: int | None  # a rejected map object of the class within the gate: found but not believed
+    images_seen: int | None = None  # images that saw it whole and unhidden (objslam_tools.seen)
 
 
 @dataclass(frozen=True)
@@ -179,6 +190,7 @@ class MapScore:
     nees_xy: NeesSummary
     nees_xyz: NeesSummary
     diagnostics: dict[str, Any] = field(default_factory=dict)
+    seen: frozenset[int] | None = None  # real objects the camera saw (None: not known)
 
     @property
     def precision(self) -> float:
@@ -187,6 +199,13 @@ class MapScore:
     @property
     def recall(self) -> float:
         return len(self.matches) / self.truth_count if self.truth_count else float("nan")
+
+    @property
+    def recall_seen(self) -> float:
+        """Recall over the real objects the camera saw (NaN if none was, or it is not known)."""
+        if not self.seen:
+            return float("nan")
+        return sum(1 for m in self.matches if m.truth_id in self.seen) / len(self.seen)
 
     def _errors(self, name: str) -> NDArray[np.float64]:
         return np.array([getattr(m, name) for m in self.matches], dtype=float)
@@ -211,6 +230,8 @@ class MapScore:
             "misses": len(self.misses),
             "precision": _none_if_nan(self.precision),
             "recall": _none_if_nan(self.recall),
+            "seen_objects": None if self.seen is None else len(self.seen),
+            "recall_seen": _none_if_nan(self.recall_seen),
             "xy_error_mean_m": stat(xy, np.mean),
             "xy_error_median_m": stat(xy, np.median),
             "xy_error_max_m": stat(xy, np.max),
@@ -404,7 +425,8 @@ def score_map(built_map: BuiltMap, reference: Reference, gate_m: float = DEFAULT
                 if np.linalg.norm(rejected_pos[o.id][:2] - truth_pos[i, :2]) <= gate_m
             ]
             t = truth.objects[i]
-            misses.append(Miss(t.id, label, t.position_m, min(near)[1] if near else None))
+            seen_in = None if reference.images_seen is None else reference.images_seen.get(t.id, 0)
+            misses.append(Miss(t.id, label, t.position_m, min(near)[1] if near else None, seen_in))
 
     return MapScore(
         name=name,
@@ -420,6 +442,7 @@ def score_map(built_map: BuiltMap, reference: Reference, gate_m: float = DEFAULT
         nees_xy=nees_summary([m.nees_xy for m in matches], 2),
         nees_xyz=nees_summary([m.nees_xyz for m in matches], 3),
         diagnostics=dict(built_map.diagnostics),
+        seen=None if reference.images_seen is None else seen_ids(reference.images_seen),
     )
 
 
@@ -443,7 +466,9 @@ _ROWS: tuple[tuple[str, str, str], ...] = (
     ("false_positives", "false positives", "d"),
     ("misses", "misses", "d"),
     ("precision", "precision", ".3f"),
-    ("recall", "recall", ".3f"),
+    ("recall", "recall (all real objects)", ".3f"),
+    ("seen_objects", "objects the camera saw", "d"),
+    ("recall_seen", "recall (objects it saw)", ".3f"),
     ("xy_error_mean_m", "xy error mean [m]", ".3f"),
     ("xy_error_median_m", "xy error median [m]", ".3f"),
     ("xy_error_max_m", "xy error max [m]", ".3f"),
@@ -507,6 +532,8 @@ def format_details(score: MapScore) -> str:
         for m in score.misses:
             x, y, z = m.position_m
             why = f"  (rejected map object {m.rejected_map_id} is there)" if m.rejected_map_id is not None else ""
+            if m.images_seen is not None:
+                why += f"  seen whole in {m.images_seen} images"
             out.append(f"    truth {m.truth_id:>3} {m.label:<7} at ({x:6.2f}, {y:6.2f}, {z:4.2f}){why}")
     if score.matches:
         out.append("  matches (map id -> truth id: xy error, P, NEES xy):")

@@ -214,6 +214,7 @@ def overlay_figure(
 ) -> Figure:
     """The Figure-3-style overlay of the map's objects on one image (module docstring)."""
     mount = mount or CameraMount()
+    camera = mount.level_view(camera)  # the slice model's directions are the level frame's
     rgb = decode_rgb(frame)
     height, width = rgb.shape[:2]
     # Small images are shown enlarged so outlines and labels stay legible.

@@ -5,7 +5,7 @@ which is *not* the ``odom`` frame of ``/odom``: the robot starts at a non-identi
 there. Units are metres and radians. The file::
 
     frame_id: world
-    camera_mount: {height_m: 0.5, offset_x_m: 0.0, offset_y_m: 0.0, yaw_rad: 0.0}
+    camera_mount: {height_m: 0.5, offset_x_m: 0.0, offset_y_m: 0.0, yaw_rad: 0.0}  # + roll_rad, pitch_rad if tilted
     room: {x: [0.0, 12.0], y: [0.0, 9.0], wall_height_m: 3.0}      # optional
     objects:      # the real objects, what a map should contain
       - {id: 0, label: red, position: [x, y, z_base], size: [diameter, height]}
@@ -195,7 +195,7 @@ def _mount(d: Mapping[str, Any] | None) -> CameraMount:
     if d is None:
         return CameraMount()
     d = _mapping(d, "camera_mount")
-    known = {"height_m", "offset_x_m", "offset_y_m", "yaw_rad"}
+    known = {"height_m", "offset_x_m", "offset_y_m", "yaw_rad", "roll_rad", "pitch_rad"}
     unknown = sorted(set(d) - known)
     if unknown:
         raise ValueError(f"camera_mount: unknown key {unknown[0]!r}")
@@ -253,6 +253,8 @@ def ground_truth_to_dict(gt: GroundTruth) -> dict[str, Any]:
             "yaw_rad": float(gt.mount.yaw_rad),
         },
     }
+    if gt.mount.roll_rad or gt.mount.pitch_rad:  # a level mount's file stays as it always was
+        data["camera_mount"].update(roll_rad=float(gt.mount.roll_rad), pitch_rad=float(gt.mount.pitch_rad))
     if gt.room is not None:
         r = gt.room
         data["room"] = {

@@ -17,6 +17,7 @@ from objslam_tools.errors import UserError
 
 if TYPE_CHECKING:  # the command line imports this module to build its parsers: the rest loads on use
     from objslam_common.catalog import Catalog
+    from objslam_common.mount import CameraMountConfig
     from objslam_common.records import ImageSlices, OdometrySample
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
@@ -35,8 +36,9 @@ class BagInputs(NamedTuple):
     odometry: tuple[OdometrySample, ...]
     images: tuple[ImageSlices, ...]
     detection_seconds: float
-    diagnostics: dict[str, Any]  # the nodes' counts of skipped messages and frames, for the map file
+    diagnostics: dict[str, Any]  # the nodes' counts of skipped messages and frames, and the mount, for the map file
     skipped: str  # the same in words ('' if nothing was skipped)
+    camera_mount: CameraMountConfig  # the mount the slices were measured with, for the mapper too
 
 
 class Truth(NamedTuple):
@@ -46,10 +48,41 @@ class Truth(NamedTuple):
     track: PoseTrack
 
 
-def bag_inputs(bag: Bag, detector_config: DetectorConfig, catalog: Catalog, progress: bool = True) -> BagInputs:
-    """Run the detector over the bag's images and read its odometry, as the nodes would."""
+def bag_mount(
+    bag: Bag, mapper_mount: CameraMountConfig, detector_mount: CameraMountConfig
+) -> tuple[CameraMountConfig, str]:
+    """The camera mount to map ``bag`` with, and where it came from: the bag's /tf_static
+    where it has one, else the parameters' ``camera_mount`` (the mapper's and the detector's
+    are one setting: a file that gives them differently is refused rather than one ignored)."""
+    from objslam_common.mount import CameraMountConfig
+
+    default = CameraMountConfig()
+    if detector_mount not in (default, mapper_mount):
+        if mapper_mount != default:
+            raise UserError(
+                "the detector's and the mapper's parameters give different camera_mount values: give it once "
+                "(as config/camera_mount.yaml does, for both)"
+            )
+        mapper_mount = detector_mount
+    reading = bag.read_mount()
+    if reading is None:
+        return mapper_mount, "camera_mount parameters"
+    return CameraMountConfig.of(reading.mount), reading.source
+
+
+def bag_inputs(
+    bag: Bag,
+    detector_config: DetectorConfig,
+    catalog: Catalog,
+    progress: bool = True,
+    *,
+    mount: CameraMountConfig | None = None,
+) -> BagInputs:
+    """Run the detector over the bag's images and read its odometry, as the nodes would, with
+    the camera mount of :func:`bag_mount` (``mount``: the mapper's ``camera_mount`` parameters)."""
     import cv2
 
+    from objslam_common.config import to_mapping
     from objslam_detector.detector import Detector
     from objslam_mapper.ros.intake import input_diagnostics
     from objslam_tools.mapper_inputs import read_mapper_inputs
@@ -57,10 +90,17 @@ def bag_inputs(bag: Bag, detector_config: DetectorConfig, catalog: Catalog, prog
 
     cv2.setNumThreads(1)
     started = time.monotonic()
-    detector = Detector(detector_config, catalog)
+    camera_mount, source = bag_mount(bag, mount or detector_config.camera_mount, detector_config.camera_mount)
+    detector = Detector(dataclasses.replace(detector_config, camera_mount=camera_mount), catalog)
     read = read_mapper_inputs(bag, detector, StderrProgress("detecting") if progress else None)
-    diagnostics = {**input_diagnostics(read.counters), "skipped_frames": dict(read.skipped_frames)}
-    return BagInputs(read.odometry, read.images, time.monotonic() - started, diagnostics, read.skipped_summary())
+    diagnostics = {
+        **input_diagnostics(read.counters),
+        "skipped_frames": dict(read.skipped_frames),
+        "camera_mount": {"source": source, **to_mapping(camera_mount)},
+    }
+    return BagInputs(
+        read.odometry, read.images, time.monotonic() - started, diagnostics, read.skipped_summary(), camera_mount
+    )
 
 
 def oracle_truth(bag: Bag) -> Truth:
@@ -91,6 +131,7 @@ def build_association_map(
     sampler's chains (default: in this process)."""
     from objslam_mapper.pipeline import build_map
 
+    config = dataclasses.replace(config, camera_mount=inputs.camera_mount)
     started = time.monotonic()
     if association == "sampler":
         built = build_map(inputs.odometry, inputs.images, config, catalog, progress=progress, runner=runner)

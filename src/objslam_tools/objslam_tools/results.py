@@ -110,7 +110,7 @@ def evaluate(
     rows = []
     for scenario in scenarios:
         bag = open_bag(bag_of(scenario))
-        inputs = bag_inputs(bag, detector_config, catalog)
+        inputs = bag_inputs(bag, detector_config, catalog, mount=config.camera_mount)
         reference = load_reference(bag.path)
         truth = oracle_truth(bag) if "oracle" in associations else None
         for association in associations:

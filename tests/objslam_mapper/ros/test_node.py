@@ -71,31 +71,74 @@ def test_build_with_nothing_buffered_says_what_is_missing(processes, mapper):
     assert mapper.poll() is None
 
 
+@pytest.fixture(scope="module")
+def perspective_bag(tmp_path_factory):
+    """A forward-looking pinhole camera, pitched down, with /tf_static (``objslam sim --camera pinhole``)."""
+    out = tmp_path_factory.mktemp("perspective") / "small_pinhole"
+    done = subprocess.run(
+        objslam_cmd("sim", "small", "--camera", "pinhole", "--frames", "40", "--out", str(out)),
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def _mount_file(path, bag) -> str:
+    """The bag's /tf_static mount as the shared camera_mount parameter file both nodes take."""
+    from objslam_common.config import to_mapping
+    from objslam_common.mount import CameraMountConfig
+    from objslam_tools.bag import open_bag
+
+    reading = open_bag(bag).read_mount()
+    assert reading is not None
+    path.write_text(
+        yaml.safe_dump({"/**": {"ros__parameters": {"camera_mount": to_mapping(CameraMountConfig.of(reading.mount))}}})
+    )
+    return str(path)
+
+
 def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path, damaged_small_bag):
-    # As a user runs them (the README's walk-through): parameter files, and the bag's /clock as time.
     # The bag is bags/small with three bad odometry messages and two unusable frames: both
     # paths skip and count them alike (one policy), so the maps are still the same.
+    node_map, expected = _through_the_nodes_and_in_one_process(processes, tmp_path, damaged_small_bag, [], chains=2)
+    lost = {k: (node_map.diagnostics[k], expected.diagnostics[k]) for k in ("dropped_messages", "invalid_odometry")}
+    assert lost == {"dropped_messages": (3, 3), "invalid_odometry": (3, 3)}
+
+
+def test_a_perspective_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path, perspective_bag):
+    # The nodes take the mount from the shared parameter file; objslam map from the bag's /tf_static.
+    mount = _mount_file(tmp_path / "camera_mount.yaml", perspective_bag)
+    node_map, expected = _through_the_nodes_and_in_one_process(processes, tmp_path, perspective_bag, [mount], chains=1)
+    assert expected.diagnostics["camera_mount"]["source"] == "/tf_static base_link -> camera"
+    assert expected.diagnostics["camera_mount"]["pitch_rad"] == pytest.approx(0.1)
+    assert len(node_map.objects) >= 2
+
+
+def _through_the_nodes_and_in_one_process(processes, tmp_path, bag, extra_params: list[str], chains: int):
+    """The maps of ``bag`` built by the nodes (as a user runs them: parameter files, the bag's
+    /clock as time) and by ``objslam map``; asserted equal object by object. (node, one-process)."""
+    params = [arg for file in extra_params for arg in ("--params-file", file)]
     mapper = processes.start(
         objslam_cmd(
-            "mapper", "--ros-args", "--params-file", str(CONFIG_DIR / "mapper.yaml"),
+            "mapper", "--ros-args", "--params-file", str(CONFIG_DIR / "mapper.yaml"), *params,
             "-p", "use_sim_time:=true", "-p", f"ros.output_dir:={tmp_path}",
         )
     )  # fmt: skip
     _wait_for_line(mapper, "call /objslam/build_map")
     processes.start(
         objslam_cmd(
-            "detector", "--ros-args", "--params-file", str(CONFIG_DIR / "detector.yaml"),
+            "detector", "--ros-args", "--params-file", str(CONFIG_DIR / "detector.yaml"), *params,
             "-p", "reliable_images:=true", "-p", "use_sim_time:=true",
         )
     )  # fmt: skip
     time.sleep(3.0)  # discovery before the first message, so nothing is lost
     # A late discovery loses the first messages (then the maps may differ and the test skips).
-    player = processes.start(objslam_cmd("play", str(damaged_small_bag), "--delay", "5.0", "--rate", "1.0"))
+    player = processes.start(objslam_cmd("play", str(bag), "--delay", "5.0", "--rate", "1.0"))
     assert player.wait(timeout=120) == 0
     time.sleep(3.0)  # let the detector finish the last frames
-    chains = ("--chains", "2")  # on the node's Ray, as a user's build runs
+    chain_args = ("--chains", str(chains))  # 2: on the node's Ray, as a user's build runs
     code, response = _call(
-        processes, "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED), *chains
+        processes, "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED), *chain_args
     )
     assert code == 0, response
     assert response["success"] is True
@@ -113,8 +156,8 @@ def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path, da
     reference = tmp_path / "reference.yaml"
     one_process = processes.run(
         objslam_cmd(
-            "map", str(damaged_small_bag), "--out", str(reference),
-            "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED), *chains,
+            "map", str(bag), "--out", str(reference),
+            "--samples", str(SAMPLES), "--burn-in", str(BURN_IN), "--seed", str(SEED), *chain_args,
         ),
         timeout=300,
     )  # fmt: skip
@@ -122,10 +165,8 @@ def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path, da
     expected = read_map(reference)
     received = {k: node_map.diagnostics[k] for k in ("odometry_messages", "slice_arrays")}
     recorded = {k: expected.diagnostics[k] for k in ("odometry_messages", "slice_arrays")}
-    lost = {k: (node_map.diagnostics[k], expected.diagnostics[k]) for k in ("dropped_messages", "invalid_odometry")}
-    if lost["dropped_messages"][0] != lost["dropped_messages"][1] or received != recorded:
+    if node_map.diagnostics["dropped_messages"] != expected.diagnostics["dropped_messages"] or received != recorded:
         pytest.skip(f"messages were lost on the way (received {received}, recorded {recorded}): maps may differ")
-    assert lost == {"dropped_messages": (3, 3), "invalid_odometry": (3, 3)}
     assert len(node_map.objects) == len(expected.objects)
     for got, want in zip(node_map.objects, expected.objects, strict=True):
         assert got.label == want.label
@@ -133,8 +174,9 @@ def test_bag_through_the_nodes_gives_the_one_process_map(processes, tmp_path, da
         assert got.size_m == pytest.approx(want.size_m, abs=1e-6)
         assert got.existence_probability == pytest.approx(want.existence_probability, abs=1e-9)
         assert got.existence_by_chain == pytest.approx(want.existence_by_chain, abs=1e-9)
-    assert node_map.diagnostics["convergence"]["chains"] == 2
+    assert node_map.diagnostics["convergence"]["chains"] == chains
     assert node_map.trajectory_array() == pytest.approx(expected.trajectory_array(), abs=1e-6)
+    return node_map, expected
 
 
 BAD_ODOMETRY = textwrap.dedent(

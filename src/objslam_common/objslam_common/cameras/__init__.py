@@ -13,10 +13,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from objslam_common.cameras.perspective import FisheyeCamera, PinholeCamera
+from objslam_common.cameras.tilted import TiltedCamera, level_view
 from objslam_common.cameras.unified import DEFAULT_CAMERA, UnifiedCamera
 from objslam_common.errors import CameraModelError
 
-CameraModel = UnifiedCamera | PinholeCamera | FisheyeCamera
+CameraModel = UnifiedCamera | PinholeCamera | FisheyeCamera | TiltedCamera
 DISTORTION_MODELS = ("unified", "plumb_bob", "rational_polynomial", "equidistant")
 
 
@@ -48,6 +49,8 @@ def camera_from_calibration(
 
 def camera_info_fields(camera: CameraModel) -> tuple[str, tuple[float, ...]]:
     """(distortion_model, d) of a model as sensor_msgs/CameraInfo carries them."""
+    if isinstance(camera, TiltedCamera):
+        return camera_info_fields(camera.lens)
     if isinstance(camera, UnifiedCamera):
         return "unified", (camera.xi,)
     return camera.distortion_model, tuple(camera.d)
@@ -76,7 +79,9 @@ __all__ = [
     "CameraModelError",
     "FisheyeCamera",
     "PinholeCamera",
+    "TiltedCamera",
     "UnifiedCamera",
     "camera_from_calibration",
     "camera_info_fields",
+    "level_view",
 ]

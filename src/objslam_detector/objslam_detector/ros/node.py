@@ -188,7 +188,7 @@ class DetectorNode(Node):
     def _publish_debug(self, header, image: np.ndarray, encoding: str, slices: list[SliceMeasurement]) -> None:
         if self.camera is None or self.debug_pub is None:
             return
-        drawn = draw_slices(image, slices, self.camera, encoding, self.class_rgb)
+        drawn = draw_slices(image, slices, self.detector.view(self.camera), encoding, self.class_rgb)
         msg = Image(
             header=header, height=drawn.shape[0], width=drawn.shape[1], encoding="rgb8", step=drawn.shape[1] * 3
         )

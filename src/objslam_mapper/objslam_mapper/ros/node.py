@@ -31,6 +31,7 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from objslam_common.catalog import load_catalog
+from objslam_common.config import to_mapping
 from objslam_common.ros.conversions import time_from_ns
 from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
@@ -207,7 +208,9 @@ class MapperNode(Node):
             built = build_map(
                 odometry, images, config, self.catalog, progress=self._progress, runner=self._runner(config)
             )
-            built = dataclasses.replace(built, diagnostics={**built.diagnostics, **input_diagnostics(counters)})
+            mount = {"source": "camera_mount parameters", **to_mapping(self.config.camera_mount)}
+            extra = {**input_diagnostics(counters), "camera_mount": mount}
+            built = dataclasses.replace(built, diagnostics={**built.diagnostics, **extra})
             # All three messages before publishing any, so that a failure leaves the previous map whole.
             messages = self._map_messages(built)
         except BuildCancelledError:

@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
     catalog = load_catalog(config.catalog_file or None)
     truth = oracle_truth(bag) if args.association == "oracle" else None
 
-    inputs = bag_inputs(bag, load_config(DetectorConfig, args.detector_params, "detector"), catalog)
+    detector_config = load_config(DetectorConfig, args.detector_params, "detector")
+    inputs = bag_inputs(bag, detector_config, catalog, mount=config.camera_mount)
     sampling = StderrProgress("sampling", unit="samples")
     associating = StderrProgress("associating", unit="tracklets")
 
@@ -125,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     if args.figures:
         from objslam_tools.figures import write_figures
 
-        paths = write_figures(built, Path(args.figures), bag=bag, catalog=catalog, mount=config.camera_mount.to_mount())
+        paths = write_figures(built, Path(args.figures), bag=bag, catalog=catalog, mount=inputs.camera_mount.to_mount())
         print(f"figures: {', '.join(str(p) for p in paths)}")
     sys.stdout.flush()
     return 0

@@ -35,12 +35,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _detect(path: str, detector_config: Any, catalog: Any) -> Any:
+def _detect(path: str, detector_config: Any, catalog: Any, mount: Any) -> Any:
     """One bag's inputs (a Ray task)."""
     from objslam_tools.bag import open_bag
     from objslam_tools.mapping import bag_inputs
 
-    return bag_inputs(open_bag(path), detector_config, catalog, progress=False)
+    return bag_inputs(open_bag(path), detector_config, catalog, progress=False, mount=mount)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,9 +84,9 @@ def run(args: argparse.Namespace) -> int:
         if isinstance(runner, RayRunner):
             ray = runner.ray()
             detect = ray.remote(num_cpus=1)(_detect)
-            inputs = ray.get([detect.remote(str(b.path), detector_config, catalog) for b in bags])
+            inputs = ray.get([detect.remote(str(b.path), detector_config, catalog, config.camera_mount) for b in bags])
         else:
-            inputs = [_detect(str(b.path), detector_config, catalog) for b in bags]
+            inputs = [_detect(str(b.path), detector_config, catalog, config.camera_mount) for b in bags]
         detected = time.monotonic()
         sampling = StderrProgress("sampling", unit="steps")
         maps = build_maps(
@@ -95,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
             catalog,
             progress=lambda phase, done, total: sampling(done, total) if phase == "sampling" else None,
             runner=runner,
+            mounts=[i.camera_mount for i in inputs],
         )
     finally:
         close = getattr(runner, "close", None)

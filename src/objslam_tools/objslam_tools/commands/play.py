@@ -1,7 +1,9 @@
 """``objslam play BAG``: publish a bag with its recorded timing and ``/clock``.
 
 A whole bag without a camera image topic is refused as bad input: the pipeline would
-have nothing to detect in it. ``--topics`` plays chosen topics of any bag.
+have nothing to detect in it. ``--topics`` plays chosen topics of any bag. Played whole, a
+topic whose message type this install lacks (e.g. /tf_static: tf2_msgs is not on PyPI) is
+left out with one warning: the nodes read the mount from their parameters, not from tf.
 """
 
 from __future__ import annotations
@@ -63,16 +65,22 @@ def run(args: argparse.Namespace) -> int:
     topics = args.topics or sorted(bag.topics)
     for topic in topics:
         bag.require_topic(topic)
+    types = {}
+    for topic in topics:
+        try:
+            types[topic] = import_message_type(bag.topics[topic].msgtype)
+        except UserError as exc:
+            if args.topics is not None:
+                raise
+            logger.warning("not playing %s: %s", topic, exc)
+    topics = [t for t in topics if t in types]
     if not any(bag.topics[t].count for t in topics):
         raise UserError(f"bag {bag.path} has no messages on {', '.join(topics)}")
     options = PlayOptions(rate=args.rate, loop=args.loop, clock_hz=args.clock_hz, delay_s=args.delay)
 
     with ros_node("objslam_player") as node:
         publishers = {
-            topic: node.create_publisher(
-                import_message_type(bag.topics[topic].msgtype), topic, QoSProfile(depth=PUBLISHER_DEPTH)
-            )
-            for topic in topics
+            topic: node.create_publisher(types[topic], topic, QoSProfile(depth=PUBLISHER_DEPTH)) for topic in topics
         }
         publish_clock = make_clock_publisher(node)
 

@@ -38,20 +38,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--camera",
         choices=("omni", "pinhole", "fisheye"),
         default="omni",
-        help="omni (the bundled unified camera, default), pinhole (640x480 plumb_bob, about 90 degrees "
-        "across) or fisheye (640x640 equidistant, about 180 degrees)",
+        help="omni (the bundled unified camera, level on the rotation axis, default), pinhole (640x480 "
+        "plumb_bob, about 90 degrees across) or fisheye (640x640 equidistant, about 180 degrees); the last "
+        "two sit 0.1 m ahead of the rotation axis, pitched 0.1 rad down, and the bag carries /tf_static",
     )
+    parser.add_argument(
+        "--pitch", type=float, default=None, metavar="RAD",
+        help="the mount's pitch (rad, positive looks down; default: the camera's, above)",
+    )  # fmt: skip
+    parser.add_argument("--roll", type=float, default=None, metavar="RAD", help="the mount's roll (rad, default 0)")
     parser.add_argument("--jpeg-quality", type=int, default=90, help="JPEG quality 1..100 (default 90)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from objslam_common.cameras import PRESET_CAMERAS
+    from objslam_tools.errors import UserError
     from objslam_tools.progress import StderrProgress
-    from objslam_tools.sim.scenarios import build_scenario
+    from objslam_tools.sim.scenarios import PRESET_MOUNTS, build_scenario
     from objslam_tools.sim.writer import write_bag
 
-    scenario = build_scenario(args.scenario, seed=args.seed, frames=args.frames, camera=PRESET_CAMERAS[args.camera])
+    mount = PRESET_MOUNTS[args.camera]
+    tilt = {k: v for k, v in (("pitch_rad", args.pitch), ("roll_rad", args.roll)) if v is not None}
+    for name, value in tilt.items():
+        if not abs(value) <= 1.2:
+            raise UserError(f"--{name.split('_')[0]} must be within +-1.2 rad, got {value}")
+    mount = dataclasses.replace(mount, **tilt)
+    scenario = build_scenario(
+        args.scenario, seed=args.seed, frames=args.frames, camera=PRESET_CAMERAS[args.camera], mount=mount
+    )
     summary = write_bag(
         scenario,
         args.out,

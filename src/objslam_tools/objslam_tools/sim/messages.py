@@ -14,13 +14,15 @@ from numpy.typing import NDArray
 from rosbags.typesys import Stores, get_typestore
 
 from objslam_common.cameras import CameraModel, camera_info_fields
-from objslam_common.geometry import quaternion_from_yaw
+from objslam_common.geometry import quaternion_from_rpy, quaternion_from_yaw
+from objslam_common.mount import CameraMount
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 ODOMETRY = "nav_msgs/msg/Odometry"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 CAMERA_FRAME = "camera"
 ODOM_FRAME = "odom"
 BASE_FRAME = "base_link"
@@ -82,6 +84,19 @@ def camera_info(stamp_ns: int, camera: CameraModel) -> Any:
         binning_y=0,
         roi=_T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
     )
+
+
+def mount_transform(stamp_ns: int, mount: CameraMount) -> Any:
+    """/tf_static's TFMessage of the mount: base_link -> the camera frame (REP 103 axes)."""
+    x, y, z, w = quaternion_from_rpy(mount.roll_rad, mount.pitch_rad, mount.yaw_rad)
+    transform = _T["geometry_msgs/msg/Transform"](
+        translation=_T["geometry_msgs/msg/Vector3"](x=mount.offset_x_m, y=mount.offset_y_m, z=mount.height_m),
+        rotation=_T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+    )
+    stamped = _T["geometry_msgs/msg/TransformStamped"](
+        header=_header(stamp_ns, BASE_FRAME), child_frame_id=CAMERA_FRAME, transform=transform
+    )
+    return _T[TF_MESSAGE](transforms=[stamped])
 
 
 def odometry(

@@ -142,7 +142,8 @@ class Renderer:
         self.mount = mount or CameraMount()
         h, w = camera.height_px, camera.width_px
         v, u = np.mgrid[0:h, 0:w].astype(float)
-        azimuth, elevation = camera.unproject(u, v)
+        view = self.mount.level_view(camera)  # rays in the camera's level frame: roll and pitch applied
+        azimuth, elevation = view.unproject(u, v)
         if isinstance(camera, UnifiedCamera):
             if circle_radius_px is None:
                 circle_radius_px = min(camera.cx, camera.cy, w - 1 - camera.cx, h - 1 - camera.cy)
@@ -153,7 +154,7 @@ class Renderer:
         else:
             # A pixel beyond the fold of the distortion has no ray (its unprojection does not
             # come back to it): left black, as the lens's vignetted corners are.
-            back_u, back_v = camera.project(azimuth, elevation)
+            back_u, back_v = view.project(azimuth, elevation)
             inside = np.isfinite(back_u) & (np.hypot(back_u - u, back_v - v) < 0.01)
         pixels = np.flatnonzero(inside.ravel())
         azimuth = np.asarray(azimuth).ravel()[pixels]

@@ -32,6 +32,14 @@ ODOM_RATE_HZ = 50
 IMAGE_OFFSET_NS = 10_000_000  # the first image 10 ms after the first odometry message
 START_STAMP_NS = 1_715_679_000_000_000_000  # 2024-05-14T09:30:00Z
 GROUND_TRUTH_FRAME = "world"
+# Where `objslam sim --camera` mounts each preset camera: the omnidirectional one level on the
+# rotation axis (the bundled bags); the forward-looking ones at the robot's front, pitched a
+# little down as such cameras usually are, so that the mount's tilt is always exercised.
+PRESET_MOUNTS = {
+    "omni": CameraMount(),
+    "pinhole": CameraMount(offset_x_m=0.1, pitch_rad=0.1),
+    "fisheye": CameraMount(offset_x_m=0.1, pitch_rad=0.1),
+}
 MIN_CLEARANCE_M = 0.4
 PLACEMENT_CLEARANCE_M = 0.7
 WALL_CLEARANCE_M = 0.8

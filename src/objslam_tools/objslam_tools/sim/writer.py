@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 
+from objslam_common.cameras import UnifiedCamera
+from objslam_common.mount import CameraMount
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import write_ground_truth
 from objslam_tools.sim import messages
@@ -32,6 +34,7 @@ COMPRESSED_TOPIC = "/camera/image_raw/compressed"
 CAMERA_INFO_TOPIC = "/camera/camera_info"
 ODOM_TOPIC = "/odom"
 GROUND_TRUTH_TOPIC = "/ground_truth/odom"
+TF_STATIC_TOPIC = "/tf_static"
 IMAGE_FORMATS = ("jpeg", "png")
 DEFAULT_JPEG_QUALITY = 90
 
@@ -108,6 +111,12 @@ def write_bag(
     return BagSummary(out, scenario.frames, len(scenario.odom_stamps_ns), seconds, size)
 
 
+def carries_mount(scenario: Scenario) -> bool:
+    """Whether the bag of ``scenario`` has /tf_static: every camera but the default omnidirectional
+    one on the default mount."""
+    return not isinstance(scenario.camera, UnifiedCamera) or scenario.mount != CameraMount()
+
+
 def _write(
     scenario: Scenario, path: Path, compressed: bool, image_format: str, jpeg_quality: int, progress: Progress | None
 ) -> float:
@@ -129,6 +138,12 @@ def _write(
         info_conn = writer.add_connection(CAMERA_INFO_TOPIC, messages.CAMERA_INFO, typestore=ts)
         odom_conn = writer.add_connection(ODOM_TOPIC, messages.ODOMETRY, typestore=ts)
         truth_conn = writer.add_connection(GROUND_TRUTH_TOPIC, messages.ODOMETRY, typestore=ts)
+        if carries_mount(scenario):
+            # Forward-looking cameras' bags carry the mount (the data contract); the bundled
+            # omnidirectional bags, on the default mount, stay as they were.
+            tf_conn = writer.add_connection(TF_STATIC_TOPIC, messages.TF_MESSAGE, typestore=ts)
+            first = int(min(scenario.image_stamps_ns[0], scenario.odom_stamps_ns[0]))
+            writer.write(tf_conn, first, messages.serialize(messages.mount_transform(first, scenario.mount)))
 
         def write_odometry(j: int) -> None:
             stamp = int(scenario.odom_stamps_ns[j])
