@@ -49,6 +49,12 @@ def as_float32(value: float) -> float:
         return float(np.float32(value))
 
 
+# Edges of a slice that the view cut off (``SliceMeasurement.cut_edges``, objslam_msgs/Slice):
+# the image border, the body mask or the field of view hides the object beyond them, so each
+# is a bound, not a measurement. Left is the counter-clockwise (larger azimuth) side.
+CUT_LEFT, CUT_RIGHT, CUT_TOP, CUT_BOTTOM = 1, 2, 4, 8
+
+
 @dataclass(frozen=True)
 class SliceMeasurement:
     """One detection: the image slice around a blob of class ``label`` (objslam_msgs/Slice).
@@ -59,7 +65,8 @@ class SliceMeasurement:
     camera's forward axis, elevation above the horizontal). The ``*_px`` and ``angle_*``
     fields describe the sector in the original image, for overlays; ``truncated`` says
     the blob touches another class's blob or the edge of the view, so its extent is
-    probably cut short (its confidence is lowered too). The fields the message carries as
+    probably cut short (its confidence is lowered too); ``cut_edges`` (``CUT_*`` bits) says
+    which edges the view itself cut off. The fields the message carries as
     float32 are rounded to float32 here. The stamp is the image's (:class:`ImageSlices`).
     """
 
@@ -75,6 +82,7 @@ class SliceMeasurement:
     angle_end_rad: float = 0.0
     pixel_count: int = 0
     truncated: bool = False
+    cut_edges: int = 0
 
     def __post_init__(self) -> None:
         _require_finite(
@@ -87,6 +95,10 @@ class SliceMeasurement:
         )
         if not self.label:
             raise RecordError("SliceMeasurement: label must not be empty")
+        if not 0 <= self.cut_edges <= CUT_LEFT | CUT_RIGHT | CUT_TOP | CUT_BOTTOM:
+            raise RecordError(
+                f"SliceMeasurement: cut_edges must be a combination of the CUT_* bits, got {self.cut_edges}"
+            )
         if self.angular_width_rad <= 0.0:
             raise RecordError(f"SliceMeasurement: angular_width_rad must be > 0, got {self.angular_width_rad}")
         if self.elevation_top_rad < self.elevation_bottom_rad:

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from objslam_common.cameras import CameraModel, UnifiedCamera, level_view
 from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.errors import ConfigError
-from objslam_common.records import SliceMeasurement
+from objslam_common.records import CUT_BOTTOM, CUT_LEFT, CUT_RIGHT, CUT_TOP, SliceMeasurement
 from objslam_detector.blobs import Blob, Segmenter, clean, strip
 from objslam_detector.colors import ColorGate, classify, derive_gates
 from objslam_detector.config import DetectorConfig
@@ -72,9 +72,10 @@ class Detector:
         blobs = segmenter.blobs(class_index)
         slices = []
         for blob in blobs:
-            truncated = blob.cut or _beside_other_class(blob, class_index) or _at_view_edge(blob, pano, rgb)
+            cuts = _view_cuts(blob, pano, rgb)
+            truncated = blob.cut or _beside_other_class(blob, class_index) or cuts != 0
             label = self.gates[blob.class_index - 1].label
-            slices.append(measure(blob, label, rgb, pano, truncated, self.config.blobs.truncated_confidence))
+            slices.append(measure(blob, label, rgb, pano, truncated, self.config.blobs.truncated_confidence, cuts))
         return slices
 
     def unwarp(self, image: NDArray, camera: CameraModel, encoding: str = "rgb8") -> NDArray[np.uint8]:
@@ -117,29 +118,31 @@ def _beside_other_class(blob: Blob, class_index: NDArray[np.uint8]) -> bool:
     return bool(np.any((sides != 0) & (sides != blob.class_index)))
 
 
-def _at_view_edge(blob: Blob, pano: Panorama, rgb_panorama: NDArray[np.uint8]) -> bool:
-    """The blob reaches the panorama's top or bottom, or the part outside the image or its dark border.
+def _view_cuts(blob: Blob, pano: Panorama, rgb_panorama: NDArray[np.uint8]) -> int:
+    """The blob's edges the view cut off, as ``CUT_*`` bits: it reaches the panorama's top or
+    bottom, or the part outside the image or its dark border right above, below, left or right.
 
     Mirror cameras (and renderers) leave the image black outside a circle that may lie
     inside the image rectangle, so black right above or below a blob also means the
-    view cut it. A perspective or fisheye camera's view ends left and right too: a blob
-    beside the part of the panorama it does not see is cut there.
+    view cut it. A perspective or fisheye camera's view ends left and right too.
     """
-    if blob.row0 == 0 or blob.row0 + blob.rows >= pano.rows:
-        return True
+    body = slice(blob.row0, blob.row0 + blob.rows)
+    left, right = blob.col0 + blob.cols, blob.col0  # columns grow with azimuth: left is the far side
+    cuts = 0
+    for bit, row, at_edge in (
+        (CUT_TOP, blob.row0 - 1, blob.row0 == 0),
+        (CUT_BOTTOM, blob.row0 + blob.rows, blob.row0 + blob.rows >= pano.rows),
+    ):
+        if at_edge:
+            cuts |= bit
+            continue
+        rows = slice(row, row + 1)
+        cols = (blob.col0, blob.col0 + blob.cols)
+        if not strip(pano.inside, rows, *cols).all() or np.any(strip(rgb_panorama, rows, *cols).max(axis=-1) <= _BLACK):
+            cuts |= bit
     if not isinstance(pano.camera, UnifiedCamera):
-        body = slice(blob.row0, blob.row0 + blob.rows)
-        beside = np.concatenate(
-            [
-                strip(pano.inside, body, blob.col0 - 1, blob.col0),
-                strip(pano.inside, body, blob.col0 + blob.cols, blob.col0 + blob.cols + 1),
-            ],
-            axis=1,
-        )
-        if not beside.all():
-            return True
-    rows = slice(blob.row0 - 1, blob.row0 + blob.rows + 1, blob.rows + 1)  # the rows just above and below
-    cols = (blob.col0, blob.col0 + blob.cols)
-    if not strip(pano.inside, rows, *cols).all():
-        return True
-    return bool(np.any(strip(rgb_panorama, rows, *cols).max(axis=-1) <= _BLACK))
+        if not strip(pano.inside, body, left, left + 1).all():
+            cuts |= CUT_LEFT
+        if not strip(pano.inside, body, right - 1, right).all():
+            cuts |= CUT_RIGHT
+    return cuts

@@ -186,6 +186,7 @@ def measure(
     pano: Panorama,
     truncated: bool,
     truncated_confidence: float,
+    cut_edges: int = 0,
 ) -> SliceMeasurement:
     """The slice of a blob: full azimuth extent and lowest/highest elevation of its silhouette."""
     m = MARGIN_PX
@@ -227,4 +228,5 @@ def measure(
         angle_end_rad=angle_end,
         pixel_count=blob.pixel_count,
         truncated=truncated,
+        cut_edges=cut_edges,
     )

@@ -183,18 +183,18 @@ def truth_residual_chi2(
     size_m: ArrayLike,
     mount: CameraMount,
     *,
-    censored_top: ArrayLike | None = None,
+    bounds: ArrayLike | None = None,
 ) -> NDArray[np.float64]:
     """(M,) squared normalized residual of slices against their objects' predictions at the truth.
 
     ``measured`` and ``stddev`` (M, 4) as in the factor graph; ``map_T_base`` (M, 3) the true
     poses, ``location_m`` (M, 3) and ``size_m`` (M, 2) the true objects (rows broadcast);
-    ``censored_top`` (M,) the upper edges that are lower bounds (slice_model.censor).
+    ``bounds`` (M, 4) which components are bounds, not measurements (slice_model.censor).
     Predictions outside the model's domain (camera inside the object) give inf.
     """
     measured = np.atleast_2d(np.asarray(measured, dtype=float))
     pred = predict_slices(map_T_base, location_m, size_m, mount, jacobians=False)
     normalized = slice_error(pred.values, measured) / np.atleast_2d(np.asarray(stddev, dtype=float))
-    if censored_top is not None:
-        normalized[:, ELEVATION_TOP] *= censor(normalized.T, np.asarray(censored_top, dtype=bool))
+    if bounds is not None:
+        normalized *= censor(normalized.T, np.asarray(bounds)).T
     return np.where(pred.valid, np.sum(normalized * normalized, axis=1), np.inf)

@@ -77,7 +77,7 @@ def oracle_groups(
         [o.position_m for o in truth],
         [o.size_m for o in truth],
         ground_truth.mount,
-        censored_top=problem.measurement_censored_top[index],
+        bounds=problem.measurement_bounds[index],
     )
     consistent = chi2 <= options.residual_gate_chi2
     groups: dict[int, list[int]] = {}

@@ -23,7 +23,7 @@ from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, with_extra_priors
 from objslam_mapper.graph.solver import solve
-from objslam_mapper.model.slice_model import predict_slices, slice_error
+from objslam_mapper.model.slice_model import LOWER_BOUND, predict_slices, slice_error
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
 
@@ -202,11 +202,12 @@ def test_upper_edges_cut_by_the_view_are_lower_bounds():
     below = SliceMeasurement("blue", 0.4, 0.3, 0.1, -0.2, 0.3)  # cut short, not by the view
     images = [ImageSlices(1 + k, (c,)) for k, c in enumerate(cut)] + [ImageSlices(5, (sure, below))]
     problem = build_problem(odom, images, MOUNT, CATALOG, CONFIG)
-    assert problem.measurement_censored_top.tolist() == [True, True, True, False, False]
+    assert (problem.measurement_bounds[:, 3] == LOWER_BOUND).tolist() == [True, True, True, False, False]
+    assert not problem.measurement_bounds[:, :3].any()
     scale = CONFIG.slice_noise.low_confidence_stddev_scale
     np.testing.assert_allclose(problem.measurement_stddev[[0, 1, 2, 4]], scale * problem.measurement_stddev[[3] * 4])
     off = dataclasses.replace(CONFIG, slice_noise=dataclasses.replace(CONFIG.slice_noise, censor_view_top=False))
-    assert not build_problem(odom, images, MOUNT, CATALOG, off).measurement_censored_top.any()
+    assert not build_problem(odom, images, MOUNT, CATALOG, off).measurement_bounds.any()
 
 
 @pytest.mark.parametrize(

@@ -32,7 +32,7 @@ from objslam_mapper.graph.gtsam_backend import (
 from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.graph.solver import solve
-from objslam_mapper.model.slice_model import predict_slices
+from objslam_mapper.model.slice_model import bounds_of_cuts, predict_slices
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 
 CATALOG = load_catalog()
@@ -330,7 +330,9 @@ def test_upper_edges_cut_by_the_view_are_lower_bounds_in_both_backends(reference
     at = predict_slices(poses[problem.measurement_pose], objects[owner, :3], objects[owner, 3:], problem.mount)
     offset = np.where(np.arange(problem.measurement_count) % 2 == 0, 0.05, -0.05)
     measured[cut, 3] = at.values[cut, 3] + offset[cut]
-    censored = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
+    censored = dataclasses.replace(
+        problem, measurements=measured, measurement_bounds=bounds_of_cuts(np.zeros(cut.shape, int), cut)
+    )
     graph, keys = build_gtsam_graph(censored, groups, per_detection=True, cap_scale=math.inf)
     values = keys.to_values(poses, objects, calibration)
     slice_factors = [i for i in range(graph.size()) if isinstance(graph.at(i), gtsam.CustomFactor)][N_POSES:]

@@ -135,29 +135,39 @@ def _whitened_residuals(problem, poses, group, state):
     res = pred.values - problem.measurements[group].T
     res[0] = wrap_angle(res[0])
     res = res / problem.measurement_stddev[group].T
-    res[3] *= censor(res, problem.measurement_censored_top[group])
+    res *= censor(res, problem.measurement_bounds[group])
     prior = (state - problem.prior_mean[label]) / problem.prior_stddev[label]
     return np.concatenate([res.ravel(), prior])
 
 
-@pytest.mark.parametrize("censored", [False, True], ids=["measured", "upper-edges-cut"])
+@pytest.mark.parametrize("censored", ["measured", "upper-edges-cut", "every-edge-cut"])
 def test_conditional_object_evidence_matches_finite_differences_and_the_full_map(office, censored):
     import dataclasses
 
     from objslam_mapper.graph.conditional_evidence import object_evidence
     from objslam_mapper.graph.initialization import initial_object
     from objslam_mapper.graph.problem import LOG_2PI
+    from objslam_mapper.model.slice_model import bounds_of_cuts
 
     run, problem = office
     groups = [g for g in run.groups(problem) if len(g) >= 5]
-    if censored:
+    cut = np.zeros(problem.measurement_count, dtype=bool)
+    cut[::3] = True
+    measured = np.array(problem.measurements)
+    sign = np.where(np.arange(problem.measurement_count)[cut] % 2 == 0, -1.0, 1.0)
+    if censored == "upper-edges-cut":
         # Every third slice's upper edge cut by the view, half of them 0.03 rad below the
         # object's (free as lower bounds), half above (they cost).
-        cut = np.zeros(problem.measurement_count, dtype=bool)
-        cut[::3] = True
-        measured = np.array(problem.measurements)
-        measured[cut, 3] += np.where(np.arange(problem.measurement_count)[cut] % 2 == 0, -0.03, 0.03)
-        problem = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
+        measured[cut, 3] += 0.03 * sign
+        bounds = bounds_of_cuts(np.zeros(cut.shape, int), cut)
+    elif censored == "every-edge-cut":
+        # Every third slice cut on some of its four edges (all combinations), every component
+        # moved 0.02 rad one way or the other: some bounds cost, some are cleared.
+        cuts = np.where(cut, np.arange(problem.measurement_count) % 16, 0)
+        measured[cut] += 0.02 * sign[:, None] * np.array([1.0, -1.0, -1.0, 1.0])
+        bounds = bounds_of_cuts(cuts, np.zeros(cut.shape, bool))
+    if censored != "measured":
+        problem = dataclasses.replace(problem, measurements=measured, measurement_bounds=bounds)
         assert cut[np.asarray(groups[0])].any()
     # Solved to the optimum (not just within the default cost tolerance): the comparison is at 1e-5 m.
     tight = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, absolute_tolerance=1e-10))

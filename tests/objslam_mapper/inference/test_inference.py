@@ -21,6 +21,7 @@ from objslam_mapper.inference.screen import ProposalScreen
 from objslam_mapper.inference.start import clear_start_objects, initial_association, recall_start_clutter
 from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
+from objslam_mapper.model.slice_model import bounds_of_cuts
 from objslam_mapper.pipeline import build_map
 from objslam_mapper.synthetic import SyntheticObject
 from tests.objslam_mapper.association_scenes import (
@@ -377,11 +378,15 @@ def test_the_target_takes_upper_edges_as_measured_and_the_map_as_lower_bounds():
     # pull the objects' tops down (the target's graph), as lower bounds they cost nothing (the map's).
     measured = np.array(problem.measurements)
     measured[cut, 3] -= 0.05
-    censored = dataclasses.replace(problem, measurements=measured, measurement_censored_top=cut)
+    censored = dataclasses.replace(
+        problem, measurements=measured, measurement_bounds=bounds_of_cuts(np.zeros(cut.shape, int), cut)
+    )
     chained = tracklets_of_problem(censored)
     target = AssociationTarget(censored, chained.tracklets, TargetOptions(clutter=ClutterConfig(distractor_weight=0.0)))
-    assert not target.problem.measurement_censored_top.any()
-    np.testing.assert_array_equal(target.estimation_problem.measurement_censored_top, cut)
+    assert not target.problem.measurement_bounds.any()
+    np.testing.assert_array_equal(
+        target.estimation_problem.measurement_bounds, bounds_of_cuts(np.zeros(cut.shape, int), cut)
+    )
     state = initial_association(chained.tracklets, 0.6)
     summary = target.summary(state)
     groups = target.groups(state)

@@ -68,6 +68,7 @@ def slice_measurement(msg: Any) -> SliceMeasurement:
         angle_end_rad=float(msg.angle_end_rad),
         pixel_count=int(msg.pixel_count),
         truncated=bool(msg.truncated),
+        cut_edges=int(msg.cut_edges),
     )
 
 
@@ -85,6 +86,7 @@ def slice_to_msg(record: SliceMeasurement) -> Slice:
         angle_end_rad=record.angle_end_rad,
         pixel_count=record.pixel_count,
         truncated=record.truncated,
+        cut_edges=record.cut_edges,
     )
 
 

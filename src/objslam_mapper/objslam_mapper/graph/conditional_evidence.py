@@ -70,7 +70,7 @@ class _ObjectSystem:
         self.poses = np.ascontiguousarray(poses[problem.measurement_pose[group]])
         self.z = np.ascontiguousarray(problem.measurements[group].T)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[group].T)
-        self.censored_top = problem.measurement_censored_top[group]
+        self.bounds = problem.measurement_bounds[group]
         self.outlier_cost = problem.measurement_outlier_cost[group]
         self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
         self.cap_scale = 1.0  # as AssociationSystem.cap_scale
@@ -87,7 +87,7 @@ class _ObjectSystem:
         pred = predict_reduced(self.poses, state[:3], state[3:], self.mount)
         if not np.all(pred.valid):
             return ObjectLinearization(math.inf, np.zeros(0), np.zeros((0, 0)), len(self.z[0]))
-        res, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.censored_top)
+        res, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.bounds)
         half = half_chi2(res)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
         if self.has_outlier_model and self.cap_scale < np.inf:

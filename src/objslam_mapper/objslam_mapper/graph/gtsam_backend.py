@@ -203,7 +203,7 @@ def _slice_factor(
     pose_keys = [GtsamKeys.pose(i) for i in pose_index]
     z = np.ascontiguousarray(problem.measurements[measurements].T)  # (4, A)
     inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[measurements].T)
-    censored_top = problem.measurement_censored_top[measurements]
+    bounds = problem.measurement_bounds[measurements]
     cap = problem.measurement_outlier_cost[measurements] * cap_scale
     capped = bool(np.isfinite(cap).any())
     mount = problem.mounts(measurements)
@@ -213,7 +213,7 @@ def _slice_factor(
         at = _read_poses(values, pose_keys)[local]
         obj = values.atVector(object_key)
         pred = predict_reduced(at, obj[:3], obj[3:], mount, jacobians=jacobians is not None)
-        err, sigma_weight = whitened_slice_error(pred.values, z, inv_sigma, censored_top)
+        err, sigma_weight = whitened_slice_error(pred.values, z, inv_sigma, bounds)
         weight = sigma_weight * truncate(err, cap) if capped else sigma_weight  # capped slices carry no information
         err[:, ~pred.valid] = _INVALID_RESIDUAL
         if jacobians is not None:

@@ -113,7 +113,7 @@ def beyond_cap(
         pred.values,
         problem.measurements[layout.measurements].T,
         1.0 / problem.measurement_stddev[layout.measurements].T,
-        problem.measurement_censored_top[layout.measurements],
+        problem.measurement_bounds[layout.measurements],
     )
     return ~pred.valid | (half_chi2(res) > cap_scale * problem.measurement_outlier_cost[layout.measurements])
 
@@ -150,7 +150,7 @@ class AssociationSystem:
         self.n_calib = problem.calibration_dim
         self.z = np.ascontiguousarray(problem.measurements[layout.measurements].T)  # (4, A)
         self.inv_sigma = np.ascontiguousarray(1.0 / problem.measurement_stddev[layout.measurements].T)
-        self.censored_top = problem.measurement_censored_top[layout.measurements]
+        self.bounds = problem.measurement_bounds[layout.measurements]
         self.outlier_cost = problem.measurement_outlier_cost[layout.measurements]
         self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
         self.cap_scale = 1.0  # the caps' multiplier (objslam_mapper.model.outliers; inf: every slice Gaussian)
@@ -260,7 +260,7 @@ class AssociationSystem:
         weights (4, A) that whiten their Jacobians (upper edges a lower bound, slice_model.censor)."""
         obj = objects[self.layout.object_of]
         pred = predict_reduced(poses[self.layout.pose_of], obj[:, :3], obj[:, 3:], self.mounts)
-        sl, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.censored_top)
+        sl, weight = whitened_slice_error(pred.values, self.z, self.inv_sigma, self.bounds)
         return pred, sl, weight
 
     def linearize(self, poses: NDArray, objects: NDArray, calib: NDArray) -> Linearization:

@@ -11,10 +11,11 @@ sampler (:func:`objslam_mapper.graph.solver.solve`). It holds
   i.e. images by stamp, then slice order): ``measurements[m]`` = (bearing, angular width, elevation bottom,
   elevation top), its noise, the pose it was seen from, its class; ``measurement_image``
   and ``measurement_slot`` lead back to the input ``images[i].slices[k]``. Slices of
-  low confidence (likely cut short) get inflated noise; those of them whose upper edge
-  lies at the top of the camera's view (:func:`at_view_top`) were cut by the view, so
-  their upper edge is the view's, a lower bound on the object's
-  (``measurement_censored_top``, :func:`objslam_mapper.model.slice_model.censor`);
+  low confidence (likely cut short) get inflated noise; the edges the view cut off
+  (the detector's ``cut_edges``, and upper edges of low confidence at the top of the
+  camera's view, :func:`at_view_top`) are bounds on the object's, not measurements
+  (``measurement_bounds``, :func:`objslam_mapper.model.slice_model.bounds_of_cuts` and
+  :func:`~objslam_mapper.model.slice_model.censor`);
   ``measurement_outlier_cost`` is
   where each slice's cost stops growing (:mod:`objslam_mapper.model.outliers`);
 - when ``odometry.calibration.enabled``, the zero-mean prior of the odometry calibration
@@ -53,7 +54,7 @@ from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SliceNoiseCo
 from objslam_mapper.errors import MapperError
 from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 from objslam_mapper.model.outliers import inlier_log_weight, outlier_cost
-from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP
+from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, bounds_of_cuts
 
 logger = logging.getLogger(__name__)
 
@@ -101,7 +102,7 @@ class GraphProblem:
     measurement_pose: NDArray[np.int64]
     measurement_label: NDArray[np.int64]
     measurement_confidence: NDArray[np.float64]
-    measurement_censored_top: NDArray[np.bool_]  # (M,) upper edge cut by the view: a lower bound (slice_model.censor)
+    measurement_bounds: NDArray[np.int8]  # (M, 4) components that are bounds, not measurements (slice_model.censor)
     measurement_image: NDArray[np.int64]
     measurement_slot: NDArray[np.int64]
     # Prior rows (P >= L): row k < L is class k's prior
@@ -236,7 +237,7 @@ def build_problem(
     classes = tuple(catalog)
     label_index = {cls.label: k for k, cls in enumerate(classes)}
     class_stddev = [class_measurement_stddev(cls, config.slice_noise, mount) for cls in classes]
-    rows, stddev, pose_of, label_of, confidence, image_of, slot_of = [], [], [], [], [], [], []
+    rows, stddev, pose_of, label_of, confidence, image_of, slot_of, cuts = [], [], [], [], [], [], [], []
     rejected_slices = 0
     for pose_index, image_index in enumerate(pose_image):
         for slot, sl in enumerate(images[image_index].slices):
@@ -252,6 +253,7 @@ def build_problem(
             confidence.append(sl.confidence)
             image_of.append(image_index)
             slot_of.append(slot)
+            cuts.append(sl.cut_edges)
     if rejected_slices:
         logger.warning("%d slices of classes not in the catalog were left out", rejected_slices)
     measurements = np.array(rows, dtype=float).reshape(-1, 4)
@@ -262,6 +264,12 @@ def build_problem(
         censored = low_confidence & at_view_top(measurements, config.slice_noise.view_top_tolerance_rad)
     if censored.any():
         logger.info("%d slices reach the top of the view: their upper edges are lower bounds", int(censored.sum()))
+    bounds = bounds_of_cuts(np.array(cuts, dtype=np.int64), censored)
+    if np.any(bounds[:, :ELEVATION_TOP]):
+        logger.info(
+            "%d slices cut by the view at a side or the bottom: those edges are bounds",
+            int(np.any(bounds[:, :ELEVATION_TOP], axis=1).sum()),
+        )
     gaussian_norm = gaussian_log_normalizer(meas_stddev)
     noise = config.slice_noise
 
@@ -295,7 +303,7 @@ def build_problem(
         measurement_pose=read_only(np.array(pose_of, dtype=np.int64)),
         measurement_label=read_only(np.array(label_of, dtype=np.int64)),
         measurement_confidence=read_only(np.array(confidence, dtype=float)),
-        measurement_censored_top=read_only(censored),
+        measurement_bounds=read_only(bounds),
         measurement_image=read_only(np.array(image_of, dtype=np.int64)),
         measurement_slot=read_only(np.array(slot_of, dtype=np.int64)),
         prior_mean=read_only(prior_mean.reshape(-1, OBJECT_DIM)),

@@ -110,8 +110,8 @@ class AssociationTarget:
         # one-sided, an upper edge no longer tells a cyan poster high on a wall from a cyan
         # object, nor one object from two beside each other: on the clutter and twins bags the
         # target then preferred those states (docs/method.md).
-        censored_top = problem.measurement_censored_top
-        problem = dataclasses.replace(problem, measurement_censored_top=np.zeros_like(censored_top))
+        bounds = problem.measurement_bounds
+        problem = dataclasses.replace(problem, measurement_bounds=np.zeros_like(bounds))
         options = options or TargetOptions()
         self.options = options
         self.work = work or Work()
@@ -119,7 +119,7 @@ class AssociationTarget:
         self.detection = options.detection
         self.view = camera_view(problem, self.detection)
         self.problem = self.clutter.problem  # with the distractors' prior rows
-        self.estimation_problem = dataclasses.replace(self.problem, measurement_censored_top=censored_top)
+        self.estimation_problem = dataclasses.replace(self.problem, measurement_bounds=bounds)
         self.tracklets = list(tracklets)
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()

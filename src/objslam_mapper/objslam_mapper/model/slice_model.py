@@ -56,6 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from objslam_common.geometry import wrap_angle
 from objslam_common.mount import CameraMount, CameraMounts
+from objslam_common.records import CUT_BOTTOM, CUT_LEFT, CUT_RIGHT, CUT_TOP
 
 BEARING, WIDTH, ELEVATION_BOTTOM, ELEVATION_TOP = range(4)
 COMPONENTS = ("bearing", "angular_width", "elevation_bottom", "elevation_top")
@@ -209,35 +210,63 @@ def predict_slices(
     )
 
 
-def censor(error: NDArray[np.float64], censored_top: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """(A,) 1 where a slice's upper edge counts, 0 where it does not.
+# What a slice component is (``GraphProblem.measurement_bounds``, (M, 4) in COMPONENTS order):
+# a measurement, a bound (the object's value is at least, or at most, the measured one) or
+# nothing at all. Edges the view cut off are bounds (objslam_common.records.CUT_*).
+MEASURED, LOWER_BOUND, UPPER_BOUND, UNMEASURED = 0, 1, -1, 2
 
-    An upper edge cut by the top of the camera's view (``censored_top``) says only that the
-    object's reaches at least that high: a one-sided factor, the Gaussian's cost where the
-    model's upper edge lies below the measured one and none where it lies above (``error``
-    (4, A), predicted minus measured, in any units of the same sign). Multiplying the upper
-    edge's whitened residual and Jacobian row by this gives that factor's residual and its
-    (one-sided) Jacobian; the Gaussian normalizer stays, so an object does not gain by
-    reaching above the view.
+
+def bounds_of_cuts(cut_edges: ArrayLike, top_at_view_top: ArrayLike) -> NDArray[np.int8]:
+    """(M, 4) bounds of slices from the detector's cut edges (``CUT_*`` bits) and the upper
+    edges found at the top of the view (objslam_mapper.graph.problem.at_view_top).
+
+    A cut left (counter-clockwise) edge leaves the object reaching further left: its width is
+    at least the measured one and its bearing at least the measured one; a cut right edge
+    the same with the bearing at most; both: the bearing says nothing. A cut upper edge is a
+    lower bound on the object's, a cut lower edge an upper bound.
     """
-    return np.where(censored_top & (error[ELEVATION_TOP] > 0.0), 0.0, 1.0)
+    cuts = np.asarray(cut_edges, dtype=np.int64).reshape(-1)
+    left, right = (cuts & CUT_LEFT) != 0, (cuts & CUT_RIGHT) != 0
+    bounds = np.zeros((len(cuts), 4), dtype=np.int8)
+    bounds[:, BEARING] = np.select([left & right, left, right], [UNMEASURED, LOWER_BOUND, UPPER_BOUND], MEASURED)
+    bounds[:, WIDTH] = np.where(left | right, LOWER_BOUND, MEASURED)
+    bounds[:, ELEVATION_TOP] = np.where(
+        ((cuts & CUT_TOP) != 0) | np.asarray(top_at_view_top, dtype=bool), LOWER_BOUND, MEASURED
+    )
+    bounds[:, ELEVATION_BOTTOM] = np.where((cuts & CUT_BOTTOM) != 0, UPPER_BOUND, MEASURED)
+    return bounds
+
+
+def censor(error: NDArray[np.float64], bounds: NDArray[np.integer]) -> NDArray[np.float64]:
+    """(4, A) 1 where a slice component counts, 0 where it does not.
+
+    A component that is a bound (``bounds`` (A, 4), :func:`bounds_of_cuts`) says only that
+    the object's value is beyond it: a one-sided factor, the Gaussian's cost where the model
+    lies on the wrong side of the bound and none where it clears it (``error`` (4, A),
+    predicted minus measured, in any units of the same sign). Multiplying a component's
+    whitened residual and Jacobian row by this gives that factor's residual and its
+    (one-sided) Jacobian; the Gaussian normalizer stays, so an object does not gain by
+    reaching beyond the view.
+    """
+    b = np.asarray(bounds).T
+    free = (b == UNMEASURED) | ((b == LOWER_BOUND) & (error > 0.0)) | ((b == UPPER_BOUND) & (error < 0.0))
+    return np.where(free, 0.0, 1.0)
 
 
 def whitened_slice_error(
     predicted: NDArray[np.float64],
     measured: NDArray[np.float64],
     inv_sigma: NDArray[np.float64],
-    censored_top: NDArray[np.bool_],
+    bounds: NDArray[np.integer],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Whitened residuals (4, A) of component-major slices, bearing wrapped, and the weights
-    (4, A) that whiten their Jacobians: ``inv_sigma``, with the upper edge of each
-    ``censored_top`` slice zeroed where the model clears its bound (:func:`censor`)."""
+    (4, A) that whiten their Jacobians: ``inv_sigma``, zeroed where a component that is a
+    bound (``bounds`` (A, 4)) is cleared by the model (:func:`censor`)."""
     error = predicted - measured
     error[BEARING] = wrap_angle(error[BEARING])
     weight = inv_sigma
-    if censored_top.any():
-        weight = inv_sigma.copy()
-        weight[ELEVATION_TOP] *= censor(error, censored_top)
+    if np.any(bounds):
+        weight = inv_sigma * censor(error, bounds)
     return error * weight, weight
 
 

@@ -32,23 +32,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="ASSOCIATION",
         help="data associations (default: all four)",
     )
+    parser.add_argument(
+        "--cameras",
+        nargs="+",
+        default=["omni"],
+        choices=("omni", "pinhole", "fisheye"),
+        metavar="CAMERA",
+        help="render and map each scenario with these cameras (objslam sim --camera; default omni)",
+    )
     parser.add_argument("--cache", type=Path, default=Path("out/bags"), help="where rendered bags are kept")
     parser.add_argument("--out", type=Path, default=Path("docs/results.md"), help="the page to write")
     parser.add_argument("--readme", type=Path, default=Path("README.md"), help="README whose table to update")
     parser.add_argument("--no-readme", action="store_true", help="leave the README alone")
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
+    parser.add_argument(
+        "--chains", type=int, default=None, metavar="K", help="chains per map (default: the parameters' sampler.chains)"
+    )
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
+
     from objslam_common.config import default_config_dir, load_config
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
     from objslam_tools.errors import UserError
+    from objslam_tools.mapping import with_sampler_overrides
     from objslam_tools.results import Scenario, evaluate, page, provenance, scenario_bag, with_readme_table
     from objslam_tools.sim.scenarios import SCENARIO_NAMES
 
-    scenarios = [Scenario.parse(s) for s in args.scenarios]
+    scenarios = [dataclasses.replace(Scenario.parse(s), camera=c) for s in args.scenarios for c in args.cameras]
     unknown = [s.name for s in scenarios if s.name not in SCENARIO_NAMES]
     if unknown:
         raise UserError(f"unknown scenario {unknown[0]!r} (one of {', '.join(SCENARIO_NAMES)})")
@@ -59,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
     for target in (args.out, args.cache):
         target.parent.mkdir(parents=True, exist_ok=True)
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
+    config = with_sampler_overrides(config, chains=args.chains)
     rows = evaluate(
         scenarios,
         args.associations,

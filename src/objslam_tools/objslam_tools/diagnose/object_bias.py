@@ -23,7 +23,7 @@ from objslam_common.catalog import load_catalog
 from objslam_common.config import default_config_dir, load_config
 from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import MapperConfig
-from objslam_mapper.model.slice_model import BEARING, COMPONENTS, ELEVATION_TOP, censor, predict_reduced
+from objslam_mapper.model.slice_model import BEARING, COMPONENTS, censor, predict_reduced
 from objslam_tools.oracle_map import oracle_problem
 
 
@@ -43,7 +43,7 @@ def object_biases(bag_path: str, config: MapperConfig) -> list[tuple[str, int, n
         error = pred.values - problem.measurements[index].T
         error[BEARING] = wrap_angle(error[BEARING])
         whitened = error / problem.measurement_stddev[index].T
-        whitened[ELEVATION_TOP] *= censor(whitened, problem.measurement_censored_top[index])
+        whitened *= censor(whitened, problem.measurement_bounds[index])
         out.append((obj.label, count, whitened.mean(axis=1), whitened.std(axis=1)))
     return out
 
