@@ -67,3 +67,28 @@ def test_the_command_writes_a_page_that_names_its_command_and_commit(tmp_path):
     assert "| small |" not in readme.read_text()  # the README shows the sampler's rows only
     bad = subprocess.run(objslam_cmd("results", "--scenarios", "nope", "--no-readme"), capture_output=True, text=True)
     assert bad.returncode == 2 and "unknown scenario 'nope'" in bad.stderr
+
+
+def test_a_camera_page_gives_the_seen_recall_and_says_why_rows_miss():
+    from objslam_tools.results import page
+
+    seen = {**GOOD, "recall": 0.4, "recall_seen": 1.0, "seen_objects": 2}
+    missing = {**seen, "precision": 0.5}
+    rows = [
+        Row("small", "sampler", GOOD, 5.0),
+        Row("small", "sampler", seen, 5.0, "pinhole"),
+        Row(
+            "small",
+            "sampler",
+            missing,
+            5.0,
+            "fisheye",
+            ("false positive red (P 1.00), 1.40 m from the nearest real red",),
+        ),
+    ]
+    # The recall target is judged on the objects the camera saw.
+    assert rows[1].meets() == [True] * 6
+    text = page(rows, "objslam results --cameras omni pinhole fisheye", "commit `abc`")
+    assert "| small | pinhole | sampler | 5/5 | 1.00 | 0.40 | 1.00 of 2 |" in text
+    assert "**small (fisheye), sampler** misses: precision >= 0.95.\n  - false positive red" in text
+    assert "small (pinhole)" not in text.split("## Rows that miss a target")[1]

@@ -60,6 +60,7 @@ class Row:
     metrics: dict[str, Any]
     seconds: float  # the map build, detection included
     camera: str = "omni"
+    notes: tuple[str, ...] = ()  # the map's false positives and misses, in words
 
     def meets(self) -> list[bool]:
         """One verdict per target (:data:`TARGETS`)."""
@@ -132,8 +133,48 @@ def evaluate(
             built = build_association_map(inputs, association, config, catalog, truth=truth)
             score = score_map(built, reference, name=association)
             metrics = {**score.metrics(), "chains": config.sampler.chains if association == "sampler" else None}
-            rows.append(Row(scenario.label, association, metrics, built.diagnostics["wall_time_s"], scenario.camera))
+            rows.append(
+                Row(
+                    scenario.label,
+                    association,
+                    metrics,
+                    built.diagnostics["wall_time_s"],
+                    scenario.camera,
+                    error_notes(score),
+                )
+            )
     return rows
+
+
+def error_notes(score: Any) -> tuple[str, ...]:
+    """A map's false positives and misses in words (objslam_tools.evaluate.MapScore)."""
+    notes = []
+    for fp in score.false_positives:
+        near = f"{fp.nearest_truth_m:.2f} m from the nearest real {fp.label}"
+        what = f", on {fp.distractor_kind} distractor {fp.distractor_id}" if fp.distractor_id is not None else ""
+        notes.append(f"false positive {fp.label} (P {fp.existence_probability:.2f}), {near}{what}")
+    for miss in score.misses:
+        seen = "" if miss.images_seen is None else f", seen whole in {miss.images_seen} images"
+        rejected = f", rejected map object {miss.rejected_map_id} there" if miss.rejected_map_id is not None else ""
+        notes.append(f"missed {miss.label} (truth {miss.truth_id}){seen}{rejected}")
+    return tuple(notes)
+
+
+def _misses(rows: Sequence[Row]) -> str:
+    """Every row that misses a target: which, and the map's errors that make it miss."""
+    lines = []
+    names = [t.strip() for t in TARGETS.split(",")]
+    for row in rows:
+        met = row.meets()
+        if all(met):
+            continue
+        missed = "; ".join(name for name, ok in zip(names, met, strict=True) if not ok)
+        camera = f" ({row.camera})" if row.camera != "omni" else ""
+        details = "".join(f"\n  - {note}" for note in row.notes)
+        lines.append(f"- **{row.scenario}{camera}, {row.association}** misses: {missed}.{details}")
+    if not lines:
+        return ""
+    return "\n## Rows that miss a target\n\n" + "\n".join(lines) + "\n"
 
 
 def _fmt(value: float | None, spec: str) -> str:
@@ -188,14 +229,10 @@ def page(rows: Sequence[Row], command: str, origin: str) -> str:
     met = sum(all(r.meets()) for r in rows)
     return f"""# Results
 
-Made by `{command}` from {origin}. Rerun the command to regenerate this page (and the
-README's table); bags that are not bundled are rendered into the cache folder first.
+Made by `{command}` from {origin}. Rerun the command to regenerate this page; bags that
+are not bundled are rendered into the cache folder first.
 
-Each scenario's bag is mapped once per data association from the same detections: the
-sampler (the default, paper Algorithms 1 and 2 with this project's additions,
-[method](method.md)) and three baselines through the same factor graph: `greedy`
-(nearest neighbour with a Mahalanobis gate), `none` (every tracklet its own object) and
-`oracle` (the ground-truth association: what the factor graph can do at best). Each map
+{_associations_paragraph(rows)} Each map
 is scored as `objslam eval` scores it: the trajectory aligned to the ground truth by a
 least-squares SE(2) fit, objects matched per class within 0.5 m.
 
@@ -204,7 +241,22 @@ Each map ran {_chains(rows)}.
 Times are wall seconds for detection and map building on the machine named above; this
 kind of machine is noisy, so compare times within one run, not across runs.
 
-{table(rows)}"""
+{table(rows)}{_misses(rows)}"""
+
+
+def _associations_paragraph(rows: Sequence[Row]) -> str:
+    if {r.association for r in rows} == {"sampler"}:
+        return (
+            "Each scenario's bag is mapped by the sampler (the default, paper Algorithms 1 and 2 with this "
+            "project's additions, [method](method.md))."
+        )
+    return (
+        "Each scenario's bag is mapped once per data association from the same detections: the sampler (the "
+        "default, paper Algorithms 1 and 2 with this project's additions, [method](method.md)) and three "
+        "baselines through the same factor graph: `greedy` (nearest neighbour with a Mahalanobis gate), `none` "
+        "(every tracklet its own object) and `oracle` (the ground-truth association: what the factor graph can "
+        "do at best)."
+    )
 
 
 def _cameras_paragraph(rows: Sequence[Row]) -> str:

@@ -395,3 +395,20 @@ def test_the_target_takes_upper_edges_as_measured_and_the_map_as_lower_bounds():
     heights = [o.size_m[1] for o in summary.objects]
     np.testing.assert_allclose(heights, [o.size_m[1] for o in as_bounds.objects[: state.n_objects]], atol=1e-6)
     assert np.all(np.abs(np.subtract(heights, [o.size_m[1] for o in as_measured.objects[: state.n_objects]])) > 1e-3)
+
+
+def test_the_target_keeps_edges_cut_at_the_sides_and_bottom_as_bounds():
+    from objslam_common.records import CUT_BOTTOM, CUT_LEFT, CUT_TOP
+
+    problem = problem_of(simulate((RED_A, GREEN)))
+    cuts = np.zeros(problem.measurement_count, dtype=np.int64)
+    cuts[::2] = CUT_LEFT | CUT_TOP
+    cuts[1::4] = CUT_BOTTOM
+    bounds = bounds_of_cuts(cuts, np.zeros(cuts.shape, bool))
+    censored = dataclasses.replace(problem, measurement_bounds=bounds)
+    chained = tracklets_of_problem(censored)
+    target = AssociationTarget(censored, chained.tracklets, TargetOptions(clutter=ClutterConfig(distractor_weight=0.0)))
+    expected = np.array(bounds)
+    expected[:, 3] = 0  # only the upper edge is taken as measured
+    np.testing.assert_array_equal(target.problem.measurement_bounds[: problem.measurement_count], expected)
+    np.testing.assert_array_equal(target.estimation_problem.measurement_bounds[: problem.measurement_count], bounds)

@@ -51,6 +51,7 @@ from objslam_mapper.inference.detection import Sightings, camera_view, miss_coun
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.exclusion import no_overlap_log_probability
 from objslam_mapper.inference.tracklets import Tracklet
+from objslam_mapper.model.slice_model import ELEVATION_TOP, MEASURED
 
 # The graph of an association without objects is the odometry chain alone: its MAP is the
 # odometry (chi2 = 0), and as the map from poses to (first-pose residual, increments) has a
@@ -109,9 +110,14 @@ class AssociationTarget:
         # the map's estimates (summary) take those as the lower bounds they are. Scored
         # one-sided, an upper edge no longer tells a cyan poster high on a wall from a cyan
         # object, nor one object from two beside each other: on the clutter and twins bags the
-        # target then preferred those states (docs/method.md).
+        # target then preferred those states (docs/method.md). Edges cut at the sides and the
+        # bottom stay bounds in the target too: taken as measured, the bearing and width of a
+        # slice half out of a forward camera's view disagree with the object's, and its
+        # tracklet became an object of its own.
         bounds = problem.measurement_bounds
-        problem = dataclasses.replace(problem, measurement_bounds=np.zeros_like(bounds))
+        target_bounds = np.array(bounds)
+        target_bounds[:, ELEVATION_TOP] = MEASURED
+        problem = dataclasses.replace(problem, measurement_bounds=target_bounds)
         options = options or TargetOptions()
         self.options = options
         self.work = work or Work()
