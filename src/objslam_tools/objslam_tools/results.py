@@ -91,7 +91,7 @@ def scenario_bag(scenario: Scenario, repo: Path, cache: Path) -> Path:
     if not (path / "metadata.yaml").is_file():
         from objslam_common.cameras import PRESET_CAMERAS
         from objslam_tools.progress import StderrProgress
-        from objslam_tools.sim.scenarios import PRESET_MOUNTS, build_scenario
+        from objslam_tools.sim.scenarios import PRESET_MOUNTS, PRESET_SPINS, build_scenario
         from objslam_tools.sim.writer import write_bag
 
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -101,6 +101,7 @@ def scenario_bag(scenario: Scenario, repo: Path, cache: Path) -> Path:
                 seed=scenario.seed,
                 camera=PRESET_CAMERAS[scenario.camera],
                 mount=PRESET_MOUNTS[scenario.camera],
+                spins=PRESET_SPINS[scenario.camera],
             ),
             path,
             compressed=True,

@@ -47,6 +47,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the mount's pitch (rad, positive looks down; default: the camera's, above)",
     )  # fmt: skip
     parser.add_argument("--roll", type=float, default=None, metavar="RAD", help="the mount's roll (rad, default 0)")
+    parser.add_argument(
+        "--spins", type=int, default=None, metavar="N",
+        help="turn once around on the spot N times along the path, so that a forward camera sees the whole "
+        "room (default: 0 for omni, 3 for pinhole and fisheye)",
+    )  # fmt: skip
     parser.add_argument("--jpeg-quality", type=int, default=90, help="JPEG quality 1..100 (default 90)")
     parser.set_defaults(func=run)
 
@@ -57,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     from objslam_common.cameras import PRESET_CAMERAS
     from objslam_tools.errors import UserError
     from objslam_tools.progress import StderrProgress
-    from objslam_tools.sim.scenarios import PRESET_MOUNTS, build_scenario
+    from objslam_tools.sim.scenarios import PRESET_MOUNTS, PRESET_SPINS, build_scenario
     from objslam_tools.sim.writer import write_bag
 
     mount = PRESET_MOUNTS[args.camera]
@@ -67,7 +72,12 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--{name.split('_')[0]} must be within +-1.2 rad, got {value}")
     mount = dataclasses.replace(mount, **tilt)
     scenario = build_scenario(
-        args.scenario, seed=args.seed, frames=args.frames, camera=PRESET_CAMERAS[args.camera], mount=mount
+        args.scenario,
+        seed=args.seed,
+        frames=args.frames,
+        camera=PRESET_CAMERAS[args.camera],
+        mount=mount,
+        spins=PRESET_SPINS[args.camera] if args.spins is None else args.spins,
     )
     summary = write_bag(
         scenario,

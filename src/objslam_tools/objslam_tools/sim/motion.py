@@ -105,6 +105,54 @@ class SpeedProfile:
         return ramp_distance(t) + cruise + tail
 
 
+SPIN_S = 2.0 * np.pi / 1.0  # a turn at 1 rad/s on average, 1.5 rad/s at its fastest (smoothstep)
+MAX_SPIN_SHARE = 0.5  # spins take at most this share of a drive's time
+
+
+def spins_that_fit(duration_s: float, spins: int) -> int:
+    """At most ``spins`` turns on the spot, as many as take at most half of ``duration_s``."""
+    if spins < 0:
+        raise PathError(f"spins must be >= 0, got {spins}")
+    return min(spins, int(MAX_SPIN_SHARE * duration_s // SPIN_S))
+
+
+@dataclass(frozen=True)
+class Drive:
+    """A path driven in ``duration_s``, stopping ``spins`` times to turn once around in place.
+
+    A forward-looking camera sees only what lies ahead of the path; a turn on the spot shows
+    it the whole room from there. The spins stand at the start of ``spins`` equal legs (the
+    first where the drive begins), each :data:`SPIN_S` long, turning counter-clockwise with a
+    smooth start and stop (at most 1.5 rad/s, so that slices still chain from image to
+    image); each leg ramps from rest to rest. Without spins this is the path under one
+    :class:`SpeedProfile`. :func:`spins_that_fit` says how many fit in a drive.
+    """
+
+    path: SmoothPath
+    duration_s: float
+    spins: int = 0
+
+    def pose_at(self, t_s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(N, 3) true poses at times t (s since the start)."""
+        t = np.asarray(t_s, dtype=float)
+        if self.spins < 0:
+            raise PathError(f"spins must be >= 0, got {self.spins}")
+        if not self.spins:
+            return self.path.pose_at(SpeedProfile.for_path(self.path.length_m, self.duration_s).distance_at(t))
+        spin = SPIN_S
+        leg_s = (self.duration_s - self.spins * spin) / self.spins
+        leg_m = self.path.length_m / self.spins
+        profile = SpeedProfile.for_path(leg_m, leg_s)
+        period = spin + leg_s
+        t = np.clip(t, 0.0, self.duration_s)
+        k = np.minimum(np.floor(t / period), self.spins - 1)
+        tau = t - k * period
+        pose = self.path.pose_at(k * leg_m + profile.distance_at(np.clip(tau - spin, 0.0, leg_s)))
+        x = np.clip(tau / spin, 0.0, 1.0)
+        pose[..., 2] = wrap_angle(pose[..., 2] + 2.0 * np.pi * (3.0 * x**2 - 2.0 * x**3))
+        return pose
+
+
 @dataclass(frozen=True)
 class OdometryNoise:
     """Wheel odometry errors per increment of forward distance d (m) and turn dtheta (rad).

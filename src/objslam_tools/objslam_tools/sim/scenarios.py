@@ -24,7 +24,7 @@ from objslam_common.catalog import Catalog, load_catalog
 from objslam_common.mount import CameraMount
 from objslam_tools.errors import UserError
 from objslam_tools.ground_truth import Distractor, GroundTruth, GroundTruthObject, Room, Table
-from objslam_tools.sim.motion import OdometryNoise, SmoothPath, SpeedProfile, wheel_odometry
+from objslam_tools.sim.motion import Drive, OdometryNoise, SmoothPath, spins_that_fit, wheel_odometry
 from objslam_tools.sim.scene import Footprint, Lighting, Scene, distance_to_footprint, path_clearance_m
 
 IMAGE_RATE_HZ = 5
@@ -40,6 +40,9 @@ PRESET_MOUNTS = {
     "pinhole": CameraMount(offset_x_m=0.1, pitch_rad=0.1),
     "fisheye": CameraMount(offset_x_m=0.1, pitch_rad=0.1),
 }
+# ... and how often the robot turns around on the spot on the way, so that a forward camera
+# sees every object, from several places (motion.Drive).
+PRESET_SPINS = {"omni": 0, "pinhole": 3, "fisheye": 3}
 MIN_CLEARANCE_M = 0.4
 PLACEMENT_CLEARANCE_M = 0.7
 WALL_CLEARANCE_M = 0.8
@@ -72,6 +75,7 @@ class Scenario:
     odom_poses: NDArray[np.float64]  # (M, 3) odom_T_base, starting at the identity
     odometry_noise: OdometryNoise
     min_clearance_m: float
+    spins: int = 0  # turns on the spot along the path (motion.Drive)
 
     @property
     def frames(self) -> int:
@@ -94,6 +98,7 @@ class Scenario:
             "path_length_m": round(self.path.length_m, 3),
             "mean_speed_mps": round(self.mean_speed_mps, 3),
             "min_clearance_m": round(self.min_clearance_m, 3),
+            **({"spins": self.spins} if self.spins else {}),
             "initial_pose": [round(float(v), 6) for v in self.true_poses[0]],
             "odometry_noise": self.odometry_noise.as_dict(),
             "camera": {
@@ -387,6 +392,7 @@ def build_scenario(
     camera: CameraModel = DEFAULT_CAMERA,
     mount: CameraMount | None = None,
     odometry_noise: OdometryNoise | None = None,
+    spins: int = 0,
 ) -> Scenario:
     """The scenario ``name`` for ``seed``, with ``frames`` images (default: the scenario's own count)."""
     spec = SPECS.get(name)
@@ -427,9 +433,12 @@ def build_scenario(
     odom_period_ns = 1_000_000_000 // ODOM_RATE_HZ
     odom_count = int(np.ceil(image_t_ns[-1] / odom_period_ns)) + 1
     odom_t_ns = np.arange(odom_count, dtype=np.int64) * odom_period_ns
-    profile = SpeedProfile.for_path(path.length_m, odom_t_ns[-1] * 1e-9)
-    true_poses = path.pose_at(profile.distance_at(odom_t_ns * 1e-9))
-    image_poses = path.pose_at(profile.distance_at(image_t_ns * 1e-9))
+    if spins < 0:
+        raise ScenarioError(f"--spins must be >= 0, got {spins}")
+    spins = spins_that_fit(odom_t_ns[-1] * 1e-9, spins)
+    drive = Drive(path, odom_t_ns[-1] * 1e-9, spins)
+    true_poses = drive.pose_at(odom_t_ns * 1e-9)
+    image_poses = drive.pose_at(image_t_ns * 1e-9)
     odom_poses = wheel_odometry(true_poses, noise, np.random.default_rng([seed, 1]))
 
     return Scenario(
@@ -447,6 +456,7 @@ def build_scenario(
         odom_poses=odom_poses,
         odometry_noise=noise,
         min_clearance_m=float(min(clearance, wall_clearance)),
+        spins=spins,
     )
 
 
