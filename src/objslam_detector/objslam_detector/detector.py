@@ -75,7 +75,17 @@ class Detector:
             cuts = _view_cuts(blob, pano, rgb)
             truncated = blob.cut or _beside_other_class(blob, class_index) or cuts != 0
             label = self.gates[blob.class_index - 1].label
-            slices.append(measure(blob, label, rgb, pano, truncated, self.config.blobs.truncated_confidence, cuts))
+            slices.append(
+                measure(
+                    blob,
+                    label,
+                    rgb,
+                    pano,
+                    truncated,
+                    truncated_confidence=self.config.blobs.truncated_confidence,
+                    cut_edges=cuts,
+                )
+            )
         return slices
 
     def unwarp(self, image: NDArray, camera: CameraModel, encoding: str = "rgb8") -> NDArray[np.uint8]:

@@ -185,6 +185,7 @@ def measure(
     rgb_panorama: NDArray[np.uint8],
     pano: Panorama,
     truncated: bool,
+    *,
     truncated_confidence: float,
     cut_edges: int = 0,
 ) -> SliceMeasurement:

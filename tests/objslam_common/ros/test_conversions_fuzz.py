@@ -53,6 +53,7 @@ SLICES = st.builds(
     angle_end_rad=ANY_FLOAT,
     pixel_count=st.integers(-(2**31), 2**31),
     truncated=st.booleans(),
+    cut_edges=st.integers(0, 15),
 )
 
 
