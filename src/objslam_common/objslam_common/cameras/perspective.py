@@ -26,10 +26,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from objslam_common.cameras.rays import (
     camera_from_optical,
-    directions_from_rays,
     normalized,
     optical_from_camera,
-    rays_from_directions,
+    project_directions,
+    unproject_directions,
 )
 from objslam_common.errors import CameraModelError
 
@@ -90,16 +90,11 @@ class _Lens:
 
     def project(self, azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> tuple[NDArray, NDArray]:
         """Pixel (u, v) of directions (broadcast); NaN where a direction is not seen."""
-        a, e = np.broadcast_arrays(np.asarray(azimuth_rad, dtype=float), np.asarray(elevation_rad, dtype=float))
-        uv, valid = self.project_rays(rays_from_directions(a, e))
-        uv = np.where(valid[:, None], uv, np.nan)
-        return uv[:, 0].reshape(a.shape), uv[:, 1].reshape(a.shape)
+        return project_directions(self.project_rays, azimuth_rad, elevation_rad)
 
     def unproject(self, u_px: ArrayLike, v_px: ArrayLike) -> tuple[NDArray, NDArray]:
         """Direction (azimuth, elevation) seen at pixels (u, v) (broadcast)."""
-        u, v = np.broadcast_arrays(np.asarray(u_px, dtype=float), np.asarray(v_px, dtype=float))
-        azimuth, elevation = directions_from_rays(self.unproject_pixels(np.stack([u.ravel(), v.ravel()], axis=1)))
-        return azimuth.reshape(u.shape), elevation.reshape(u.shape)
+        return unproject_directions(self.unproject_pixels, u_px, v_px)
 
 
 @dataclass(frozen=True)

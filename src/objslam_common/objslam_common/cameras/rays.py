@@ -43,3 +43,18 @@ def camera_from_optical(rays: ArrayLike) -> NDArray[np.float64]:
 def normalized(rays: NDArray[np.float64]) -> NDArray[np.float64]:
     with np.errstate(invalid="ignore", divide="ignore"):
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+def project_directions(project_rays, azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Pixel (u, v) of directions (broadcast) through a model's ``project_rays``; NaN where not seen."""
+    a, e = np.broadcast_arrays(np.asarray(azimuth_rad, dtype=float), np.asarray(elevation_rad, dtype=float))
+    uv, valid = project_rays(rays_from_directions(a, e))
+    uv = np.where(valid[:, None], uv, np.nan)
+    return uv[:, 0].reshape(a.shape), uv[:, 1].reshape(a.shape)
+
+
+def unproject_directions(unproject_pixels, u_px: ArrayLike, v_px: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Direction (azimuth, elevation) seen at pixels (u, v) (broadcast) through a model's ``unproject_pixels``."""
+    u, v = np.broadcast_arrays(np.asarray(u_px, dtype=float), np.asarray(v_px, dtype=float))
+    azimuth, elevation = directions_from_rays(unproject_pixels(np.stack([u.ravel(), v.ravel()], axis=1)))
+    return azimuth.reshape(u.shape), elevation.reshape(u.shape)

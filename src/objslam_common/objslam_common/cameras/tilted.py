@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from objslam_common.cameras.rays import directions_from_rays, rays_from_directions
+from objslam_common.cameras.rays import project_directions, unproject_directions
 from objslam_common.geometry import rotation_from_rpy
 
 
@@ -56,16 +56,11 @@ class TiltedCamera:
 
     def project(self, azimuth_rad: ArrayLike, elevation_rad: ArrayLike) -> tuple[NDArray, NDArray]:
         """Pixel (u, v) of level-frame directions (broadcast); NaN where a direction is not seen."""
-        a, e = np.broadcast_arrays(np.asarray(azimuth_rad, dtype=float), np.asarray(elevation_rad, dtype=float))
-        uv, valid = self.project_rays(rays_from_directions(a, e))
-        uv = np.where(valid[:, None], uv, np.nan)
-        return uv[:, 0].reshape(a.shape), uv[:, 1].reshape(a.shape)
+        return project_directions(self.project_rays, azimuth_rad, elevation_rad)
 
     def unproject(self, u_px: ArrayLike, v_px: ArrayLike) -> tuple[NDArray, NDArray]:
         """Level-frame direction (azimuth, elevation) seen at pixels (u, v) (broadcast)."""
-        u, v = np.broadcast_arrays(np.asarray(u_px, dtype=float), np.asarray(v_px, dtype=float))
-        azimuth, elevation = directions_from_rays(self.unproject_pixels(np.stack([u.ravel(), v.ravel()], axis=1)))
-        return azimuth.reshape(u.shape), elevation.reshape(u.shape)
+        return unproject_directions(self.unproject_pixels, u_px, v_px)
 
 
 def level_view(lens: Any, roll_rad: float, pitch_rad: float) -> Any:
