@@ -59,6 +59,28 @@ def test_a_nearer_object_hides_one_behind_it():
     assert _shown(ROBOT, [near, [4.0, 0.45, 0.0, 0.3, 0.6]]).tolist() == [[True, True]]  # a third hidden
 
 
+def test_things_that_share_floor_space_do_not_hide_each_other():
+    # A duplicate 0.1 m in front of an object 0.4 m across covers it from the robot; one of the two
+    # is not there, so neither excuses the other's misses. A third thing behind both is hidden.
+    original = [2.0, 0.0, 0.0, 0.4, 0.6]
+    duplicate = [1.9, 0.01, 0.0, 0.4, 0.6]
+    behind = [4.0, 0.0, 0.0, 0.3, 0.4]
+    seen = sight(_Problem(), np.array(ROBOT, dtype=float), np.array([original, duplicate, behind]), CONFIG, VIEW)
+    assert hidden(seen, seen, CONFIG).tolist() == [[False, False, True]]
+    # Just clear of each other (footprints 1 cm apart), the nearer one hides the other.
+    clear = [1.59, 0.0, 0.0, 0.4, 0.6]
+    seen = sight(_Problem(), np.array(ROBOT, dtype=float), np.array([original, clear]), CONFIG, VIEW)
+    assert hidden(seen, seen, CONFIG).tolist() == [[True, False]]
+    # A table hides a floor object just behind it, unless the object stands on the table's floor space.
+    on_table = [2.0, 0.0, 0.7, 0.15, 0.25]
+    for x_m, expected in ((2.4, True), (2.1, False)):
+        floor_object = [x_m, 0.0, 0.0, 0.15, 0.9]
+        things = np.array([on_table, floor_object])
+        seen = sight(_Problem(), np.array(ROBOT, dtype=float), things, CONFIG, VIEW)
+        tables = table_sight(_Problem(), np.array(ROBOT, dtype=float), things, np.array([True, False]), CONFIG)
+        assert hidden(seen, Sight.join([seen, tables]), CONFIG)[0, 1] == expected
+
+
 def test_too_narrow_too_far_or_above_the_view_is_not_in_view():
     narrow = [6.0, 0.0, 0.0, 0.15, 0.25]  # 0.025 rad wide, below the 0.035 rad gate
     far = [11.0, 3.0, 0.0, 0.5, 0.3]  # wide enough but beyond 10 m
