@@ -187,3 +187,17 @@ def test_cli_user_errors(tmp_path, capsys):
     (bag / "ground_truth.yaml").unlink()
     assert main(["eval", str(good), "--bag", str(bag)]) == 2
     assert "no ground truth" in capsys.readouterr().err
+
+
+def test_objects_of_one_class_closer_than_their_diameters_count_as_duplicates():
+    from objslam_tools.evaluate import overlapping_pairs
+
+    def obj(i, label, x_m, diameter_m):
+        return MappedObject(i, label, (x_m, 1.0, 0.0), (diameter_m, 0.5), 1.0)
+
+    # 0.15 m apart: overlapping at 0.2 m across, clear at 0.1 m; other classes never count.
+    assert overlapping_pairs([obj(0, "blue", 0.0, 0.2), obj(1, "blue", 0.15, 0.2)]) == 1
+    assert overlapping_pairs([obj(0, "blue", 0.0, 0.1), obj(1, "blue", 0.15, 0.1)]) == 0
+    assert overlapping_pairs([obj(0, "blue", 0.0, 0.2), obj(1, "red", 0.15, 0.2)]) == 0
+    triple = [obj(k, "yellow", 0.1 * k, 0.5) for k in range(3)]
+    assert overlapping_pairs(triple) == 3

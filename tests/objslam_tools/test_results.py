@@ -21,13 +21,14 @@ GOOD = {
     "trajectory_ate_m": 0.03,
     "odometry_ate_m": 0.08,
     "distractors_as_objects": 0,
+    "overlapping_pairs": 0,
 }
 
 
 def test_a_row_meets_the_targets_one_by_one():
-    assert Row("small", "sampler", GOOD, 5.0).meets() == [True] * 6
-    worse = {**GOOD, "precision": 0.8, "xy_error_median_m": 0.06, "trajectory_ate_m": 0.05}
-    assert Row("small", "sampler", worse, 5.0).meets() == [False, True, False, True, False, True]
+    assert Row("small", "sampler", GOOD, 5.0).meets() == [True] * 7
+    worse = {**GOOD, "precision": 0.8, "xy_error_median_m": 0.06, "trajectory_ate_m": 0.05, "overlapping_pairs": 1}
+    assert Row("small", "sampler", worse, 5.0).meets() == [False, True, False, True, False, True, False]
     # An ATE of 2 cm or less passes whatever the odometry's.
     assert Row("s", "a", {**GOOD, "trajectory_ate_m": 0.015, "odometry_ate_m": 0.01}, 1.0).meets()[4]
     none = {**GOOD, "precision": None, "recall": None, "xy_error_median_m": None}
@@ -48,7 +49,7 @@ def test_the_readme_table_is_replaced_between_its_markers():
     updated = with_readme_table(readme, rows)
     assert "old" not in updated and updated.endswith(f"{README_END}\n\nmore\n")
     assert "| small | sampler | 5/5 |" in updated and "| none |" not in updated
-    assert "| 6/6 |" in table(rows) and "| 5/6 |" in table(rows)
+    assert "| 7/7 |" in table(rows) and "| 6/7 |" in table(rows)
     with pytest.raises(UserError):
         with_readme_table("# no markers\n", rows)
 
@@ -87,8 +88,36 @@ def test_a_camera_page_gives_the_seen_recall_and_says_why_rows_miss():
         ),
     ]
     # The recall target is judged on the objects the camera saw.
-    assert rows[1].meets() == [True] * 6
+    assert rows[1].meets() == [True] * 7
     text = page(rows, "objslam results --cameras omni pinhole fisheye", "commit `abc`")
     assert "| small | pinhole | sampler | 5/5 | 1.00 | 0.40 | 1.00 of 2 |" in text
     assert "**small (fisheye), sampler** misses: precision >= 0.95.\n  - false positive red" in text
     assert "small (pinhole)" not in text.split("## Rows that miss a target")[1]
+
+
+def test_rows_of_several_chains_say_how_far_the_chains_agree():
+    four = {**GOOD, "chains": 4, "rhat_max": 1.004, "ess_min": 812.4, "chains_agreeing": 3, "overlapping_pairs": 1}
+    rows = [Row("office", "sampler", four, 30.0), Row("office", "greedy", {**GOOD, "chains": None}, 3.0)]
+    text = table(rows)
+    assert "| R-hat max | ESS min | chains agreeing |" in text
+    assert "| 0 | 1 | 1.00 | 812 | 3 of 4 | 6/7 | 30 |" in text  # distractors, duplicates, chains
+    assert "| 0 | 0 | - | - | - | 7/7 | 3 |" in text
+    assert "R-hat" not in table([Row("office", "sampler", {**GOOD, "chains": 1}, 30.0)])
+
+
+def test_chain_metrics_count_the_chains_that_agree_with_the_pooled_map():
+    from types import SimpleNamespace
+
+    from objslam_tools.results import chain_metrics
+
+    def identity(p, by_chain):
+        return SimpleNamespace(existence_probability=p, existence_by_chain=by_chain)
+
+    built = SimpleNamespace(
+        objects=(identity(0.9, (1.0, 1.0, 0.6)), identity(0.7, (1.0, 0.2, 0.9))),
+        rejected=(identity(0.3, (0.0, 0.1, 0.8)),),
+        diagnostics={"convergence": {"rhat_max": "inf", "ess_bulk_min": 4.0}},
+    )
+    m = chain_metrics(built, 3)
+    assert m["chains_agreeing"] == 1 and m["rhat_max"] == float("inf") and m["ess_min"] == 4.0
+    assert chain_metrics(built, 0) == {"chains": None}

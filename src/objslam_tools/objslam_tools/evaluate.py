@@ -191,6 +191,7 @@ class MapScore:
     nees_xyz: NeesSummary
     diagnostics: dict[str, Any] = field(default_factory=dict)
     seen: frozenset[int] | None = None  # real objects the camera saw (None: not known)
+    overlapping_pairs: int = 0  # pairs of map objects of one class whose footprints overlap (overlapping_pairs)
 
     @property
     def precision(self) -> float:
@@ -248,6 +249,7 @@ class MapScore:
             "odometry_ate_m": self.odometry_ate_m,
             "distractors_as_objects": len(self.distractor_objects),
             "misses_rejected": sum(1 for m in self.misses if m.rejected_map_id is not None),
+            "overlapping_pairs": self.overlapping_pairs,
         }
 
     def to_dict(self) -> dict[str, Any]:
@@ -443,7 +445,20 @@ def score_map(built_map: BuiltMap, reference: Reference, gate_m: float = DEFAULT
         nees_xyz=nees_summary([m.nees_xyz for m in matches], 3),
         diagnostics=dict(built_map.diagnostics),
         seen=None if reference.images_seen is None else seen_ids(reference.images_seen),
+        overlapping_pairs=overlapping_pairs(built_map.objects),
     )
+
+
+def overlapping_pairs(objects: Sequence[MappedObject]) -> int:
+    """Pairs of ``objects`` of one class closer than their diameters (footprints overlap): one of
+    each pair is a duplicate, as real objects do not share floor space. Counted on the reported
+    objects (P(ID|Z) > 1/2), so it must be 0."""
+    count = 0
+    for i, a in enumerate(objects):
+        for b in objects[i + 1 :]:
+            apart = math.hypot(a.position_m[0] - b.position_m[0], a.position_m[1] - b.position_m[1])
+            count += a.label == b.label and apart < 0.5 * (a.size_m[0] + b.size_m[0])
+    return count
 
 
 def _nearest_distractor(
@@ -481,6 +496,7 @@ _ROWS: tuple[tuple[str, str, str], ...] = (
     ("odometry_ate_m", "raw odometry ATE [m]", ".3f"),
     ("distractors_as_objects", "distractors as objects", "d"),
     ("misses_rejected", "misses found but rejected", "d"),
+    ("overlapping_pairs", "overlapping pairs (duplicates)", "d"),
 )
 
 

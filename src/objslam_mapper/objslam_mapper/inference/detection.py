@@ -158,7 +158,7 @@ def sight(
     n, k = len(poses), len(things)
     if k == 0:
         empty = np.zeros((n, 0))
-        return Sight(empty, empty, empty, empty, empty, empty.astype(bool), np.zeros((3, 0)))
+        return Sight(empty, empty, empty, empty, empty, empty.astype(bool), footprint=np.zeros((3, 0)))
     pred = predict_reduced(
         np.repeat(poses, k, axis=0),
         np.tile(things[:, :3], (n, 1)),
@@ -179,7 +179,7 @@ def sight(
     # What the camera can see of a thing ends at the top of the view.
     top = np.minimum(values[ELEVATION_TOP], view.top_rad)
     footprint = np.vstack([things[:, :2].T, 0.5 * things[:, 3]])
-    return Sight(values[BEARING], values[WIDTH], values[ELEVATION_BOTTOM], top, dist, in_view, footprint)
+    return Sight(values[BEARING], values[WIDTH], values[ELEVATION_BOTTOM], top, dist, in_view, footprint=footprint)
 
 
 def table_sight(
