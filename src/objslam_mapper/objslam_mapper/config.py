@@ -459,8 +459,8 @@ class ScreenConfig:
     )
     join_floor: float = setting(
         0.1,
-        "... this one when it joins tracklets of two objects (or of clutter and an object): loop closures "
-        "need the poses to move, which the screen cannot see",
+        "... this one when it joins tracklets of two objects (or of clutter and an object) or parts them: "
+        "closing (or opening) a loop needs the poses to move, which the screen cannot see",
         minimum=1e-6,
         maximum=1.0,
     )

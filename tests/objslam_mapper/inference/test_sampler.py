@@ -84,12 +84,21 @@ def test_measurement_groups_follow_objects():
 # ---- proposals ---------------------------------------------------------------------------
 
 
-def test_proposal_probabilities_are_exact():
+def random_sight_lines(n: int, seed: int, span_m: float = 6.0):
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(0.0, span_m, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+
+
+@pytest.mark.parametrize("with_sight_lines", [False, True])
+def test_proposal_probabilities_are_exact(with_sight_lines):
     """Every reported q(J -> J') equals its sampling frequency, and the reverse q reported
     with a move equals the forward q of the reverse move from J'."""
     labels = ["r", "r", "r", "r", "g", "g"]
     states, scores, positions, weights = random_problem(labels, seed=3, span_m=4.0)
-    sampler = MetropolisHastings(labels, scores.__getitem__, positions_xy_m=positions, tracklet_weights=weights)
+    lines = random_sight_lines(len(labels), seed=4, span_m=4.0) if with_sight_lines else None
+    sampler = MetropolisHastings(
+        labels, scores.__getitem__, positions_xy_m=positions, tracklet_weights=weights, sight_lines=lines
+    )
     rng = np.random.default_rng(0)
     draws = 200
     reported: dict[tuple[str, Association, Association], tuple[float, float]] = {}
@@ -135,11 +144,14 @@ def test_proposals_respect_classes_and_clutter_switch():
 # ---- the chain against the exact distribution -------------------------------------------
 
 
-def run_chain(proposals_cls, labels, clutter, seed, steps):
+def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False):
     states, scores, positions, weights = random_problem(labels, seed=seed, clutter=clutter)
     exact = ExactDistribution.of(states, scores.__getitem__)
     sampler = MetropolisHastings(labels, scores.__getitem__)
-    sampler.proposals = proposals_cls(labels, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter)
+    lines = random_sight_lines(len(labels), seed + 50) if sight_lines else None
+    sampler.proposals = proposals_cls(
+        labels, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter, sight_lines=lines
+    )
     start = Association.of([CLUTTER] * len(labels) if clutter else range(len(labels)))
     result = sampler.run(start, steps, 1000, np.random.default_rng(100 + seed), keep_trace=False)
     return exact.total_variation(result.counts), result
@@ -151,6 +163,7 @@ CASES = {
     "2+2 tracklets, clutter": (["r", "r", "g", "g"], True, 0, 50_000),
     "3+2 tracklets, clutter": (["r", "r", "r", "g", "g"], True, 1, 150_000),
     "4+3 tracklets, no clutter": (["r", "r", "r", "r", "g", "g", "g"], False, 1, 150_000),
+    "3+2 tracklets, clutter, lines of sight": (["r", "r", "r", "g", "g"], True, 2, 150_000),
 }
 
 
@@ -158,9 +171,20 @@ CASES = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_chain_visits_states_with_their_exact_probabilities(case):
     labels, clutter, seed, steps = CASES[case]
-    tv, result = run_chain(Proposals, labels, clutter, seed, steps)
+    tv, result = run_chain(Proposals, labels, clutter, seed, steps, sight_lines="lines of sight" in case)
     assert tv < 0.05
     assert result.distinct_visited == len(enumerate_associations(labels, clutter))
+
+
+def test_a_tracklet_is_near_what_lies_on_its_line_of_sight():
+    # Rough position (5, 0); seen from the origin looking along +y.
+    proposals = Proposals(["r"], positions_xy_m=[[5.0, 0.0]], sight_lines=[[0.0, 0.0, np.pi / 2]])
+    points = np.array([[0.0, 3.0], [0.5, 8.0], [5.0, 0.5], [0.0, -2.0]])
+    d2 = proposals._tracklet_distance2(0, points)
+    # On the ray; half a metre beside it; nearer the rough position; behind the camera (to the camera).
+    assert d2 == pytest.approx([0.0, 0.25, 0.25, 4.0])
+    alone = Proposals(["r"], positions_xy_m=[[5.0, 0.0]])._tracklet_distance2(0, points)
+    assert alone == pytest.approx(((points - [5.0, 0.0]) ** 2).sum(-1))
 
 
 class ForgetsReverseDestination(Proposals):

@@ -104,6 +104,7 @@ def run_chain_task(task: ChainTask, progress: ChainProgress | None = None) -> Ch
         target,
         config.moves,
         positions_xy_m=[t.position_xy_m for t in chained.tracklets],
+        sight_lines=sight_lines(chained),
         tracklet_weights=[len(t) for t in chained.tracklets],
         allow_clutter=config.clutter.enabled,
         screen=screen if config.screen.enabled else None,
@@ -120,6 +121,12 @@ def run_chain_task(task: ChainTask, progress: ChainProgress | None = None) -> Ch
     )
     summaries = tuple(target.summary(state) for state in result.counts)
     return ChainOutcome(spec, start, result, summaries, work, time.perf_counter() - started)
+
+
+def sight_lines(chained: TrackletResult) -> list[tuple[float, float, float]] | None:
+    """The tracklets' lines of sight for the proposals (None unless every tracklet has one)."""
+    lines = [t.sight_line for t in chained.tracklets]
+    return None if any(line is None for line in lines) else lines  # type: ignore[return-value]
 
 
 class ChainRunner(Protocol):

@@ -18,8 +18,13 @@ which gives detailed balance move pair by move pair, so the chain's stationary l
 (Green, 1995). Reverse proposal probabilities are always computed in the proposed state.
 
 Proposals are geometry aware when rough tracklet positions are given: merges and
-reassignments prefer nearby objects, splits separate tracklets that are far apart. The
-weights only depend on the state and the fixed tracklet positions, and a floor keeps every
+reassignments prefer nearby objects, splits separate tracklets that are far apart. Where
+each tracklet's line of sight is given too, a tracklet's distance to an object is the
+smaller of the distance to its rough position and to its line of sight: a short tracklet's
+range (from its size) can be metres off while its bearing is not, and on ``office`` a
+5-slice tracklet 3.3 m from its object's centroid, on that object's line of sight, was
+proposed there about twice in 6000 steps; chains from other starts stayed 80 nats below.
+The weights only depend on the state and the fixed tracklet data, and a floor keeps every
 move possible, so the chain stays irreducible and the ratio exact.
 """
 
@@ -129,11 +134,18 @@ class Proposals:
         positions_xy_m: ArrayLike | None = None,
         tracklet_weights: ArrayLike | None = None,
         allow_clutter: bool = True,
+        *,
+        sight_lines: ArrayLike | None = None,
     ):
         self.labels = list(labels)
         self.moves = moves or MoveConfig()
         n = len(self.labels)
         self.positions = np.zeros((n, 2)) if positions_xy_m is None else np.asarray(positions_xy_m, float).reshape(n, 2)
+        # (T, 4): camera x, y and the unit direction of each tracklet's line of sight (None: not used).
+        self.sight_lines = None
+        if sight_lines is not None:
+            lines = np.asarray(sight_lines, float).reshape(n, 3)
+            self.sight_lines = np.column_stack([lines[:, :2], np.cos(lines[:, 2]), np.sin(lines[:, 2])])
         self.weights = np.ones(n) if tracklet_weights is None else np.asarray(tracklet_weights, float).reshape(n)
         if np.any(self.weights <= 0.0):
             raise ProposalError("tracklet weights must be positive")
@@ -219,12 +231,24 @@ class Proposals:
         if t not in view.destinations:
             own = view.assignment[t]
             keys = [j for j, lab in enumerate(view.labels) if lab == self.labels[t] and j != own]
-            weights = list(self._closeness(((view.centroids[keys] - self.positions[t]) ** 2).sum(-1)))
+            weights = list(self._closeness(self._tracklet_distance2(t, view.centroids[keys])))
             if own == CLUTTER or len(view.groups[own]) > 1:
                 keys.append(_NEW)
                 weights.append(self.moves.new_object_weight)
             view.destinations[t] = _Choice(keys, weights)
         return view.destinations[t]
+
+    def _tracklet_distance2(self, t: int, points_xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Squared distance of (K, 2) points to tracklet t: to its rough position, or to its line
+        of sight (a ray: behind the camera, to the camera) where that is nearer."""
+        d2 = ((points_xy - self.positions[t]) ** 2).sum(-1)
+        if self.sight_lines is None:
+            return d2
+        origin, direction = self.sight_lines[t, :2], self.sight_lines[t, 2:]
+        offset = points_xy - origin
+        along = np.maximum(offset @ direction, 0.0)
+        to_ray = ((offset - along[:, None] * direction) ** 2).sum(-1)
+        return np.minimum(d2, to_ray)
 
     def _seed_side_probs(self, xy: NDArray[np.float64], d2_a: NDArray, d2_b: NDArray) -> NDArray[np.float64]:
         """P(member joins seed a's side) from squared distances to the seeds a and b.

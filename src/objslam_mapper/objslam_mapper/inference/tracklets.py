@@ -65,6 +65,10 @@ class Tracklet:
     measurement_indices: tuple[int, ...]
     frame_indices: tuple[int, ...]  # the image (pose) of each slice, increasing
     position_xy_m: tuple[float, float]  # rough, from odometry and range-from-size: proposals only
+    # The camera's (x, y) and the azimuth (rad) of the line of sight of the tracklet's middle slice,
+    # from odometry: proposals only. A short tracklet's range from size can be metres off (a blob
+    # cut by an edge looks narrow, hence far); its bearing is not.
+    sight_line: tuple[float, float, float] | None = None
 
     def __len__(self) -> int:
         return len(self.measurement_indices)
@@ -239,12 +243,15 @@ def chain_tracklets(
         azimuth = cameras[frame_of[idx], 2] + meas[idx, 0]
         xy = cameras[frame_of[idx], :2] + range_m[idx, None] * np.column_stack([np.cos(azimuth), np.sin(azimuth)])
         centre = np.median(xy, axis=0)
+        middle = idx[len(idx) // 2]
+        camera = cameras[frame_of[middle]]
         tracklets.append(
             Tracklet(
                 label=labels[chain[0]],
                 measurement_indices=tuple(int(m) for m in chain),
                 frame_indices=tuple(int(frame_of[m]) for m in chain),
                 position_xy_m=(float(centre[0]), float(centre[1])),
+                sight_line=(float(camera[0]), float(camera[1]), float(camera[2] + meas[middle, 0])),
             )
         )
     logger.info(

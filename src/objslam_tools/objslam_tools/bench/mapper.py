@@ -157,6 +157,7 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
 
     from objslam_mapper.inference.chain import MetropolisHastings
     from objslam_mapper.inference.start import initial_association
+    from objslam_mapper.inference.chains import sight_lines
     from objslam_mapper.inference.target import AssociationTarget, TargetOptions
     from objslam_mapper.inference.tracklets import tracklets_of_problem
     from objslam_tools.bench.naive import time_naive_solves
@@ -171,6 +172,7 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
         positions_xy_m=[t.position_xy_m for t in chained.tracklets],
         tracklet_weights=[len(t) for t in chained.tracklets],
         allow_clutter=sampler_cfg.clutter.enabled,
+        sight_lines=sight_lines(chained),
     )
     start = initial_association(chained.tracklets, sampler_cfg.initial_merge_distance_m)
     rng = np.random.default_rng(0)
