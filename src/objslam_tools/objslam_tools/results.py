@@ -140,7 +140,10 @@ def evaluate(
         for association in associations:
             built = build_association_map(inputs, association, config, catalog, truth=truth)
             score = score_map(built, reference, name=association)
-            metrics = {**score.metrics(), **chain_metrics(built, config.sampler.chains if association == "sampler" else 0)}
+            metrics = {
+                **score.metrics(),
+                **chain_metrics(built, config.sampler.chains if association == "sampler" else 0),
+            }
             rows.append(
                 Row(
                     scenario.label,
@@ -162,10 +165,14 @@ def chain_metrics(built: Any, chains: int) -> dict[str, Any]:
         return {"chains": None}
     convergence = built.diagnostics.get("convergence") or {}
     identities = [*built.objects, *built.rejected]
-    agreeing = sum(
-        all((o.existence_by_chain[k] > 0.5) == (o.existence_probability > 0.5) for o in identities)
-        for k in range(chains)
-    ) if chains > 1 and all(len(o.existence_by_chain) == chains for o in identities) else None
+    agreeing = (
+        sum(
+            all((o.existence_by_chain[k] > 0.5) == (o.existence_probability > 0.5) for o in identities)
+            for k in range(chains)
+        )
+        if chains > 1 and all(len(o.existence_by_chain) == chains for o in identities)
+        else None
+    )
     rhat = convergence.get("rhat_max")
     return {
         "chains": chains,
@@ -224,7 +231,9 @@ def table(rows: Sequence[Row]) -> str:
         "| diameter / height error m | ATE / odometry ATE m | distractors as objects | duplicates | "
         + ("R-hat max | ESS min | chains agreeing | " if chains else "")
         + "targets met | time s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|---|" if cameras else "") + ("---|---|---|" if chains else ""),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|"
+        + ("---|---|" if cameras else "")
+        + ("---|---|---|" if chains else ""),
     ]
     for row in rows:
         m = row.metrics

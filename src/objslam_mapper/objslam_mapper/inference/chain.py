@@ -143,7 +143,8 @@ class Acceptance(NamedTuple):
 
 
 def _joins(state: Association, new: Association) -> bool:
-    """Whether an object of ``new`` holds tracklets of two objects of ``state`` (or an object's and a clutter tracklet)."""
+    """Whether an object of ``new`` holds tracklets of two objects of ``state`` (or an object's
+    and a clutter tracklet)."""
     for group in new.groups:
         owners = {state.assignment[t] if state.assignment[t] != CLUTTER else (CLUTTER, t) for t in group}
         if len(owners) > 1:

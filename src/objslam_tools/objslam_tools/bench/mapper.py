@@ -156,8 +156,8 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
     import numpy as np
 
     from objslam_mapper.inference.chain import MetropolisHastings
-    from objslam_mapper.inference.start import initial_association
     from objslam_mapper.inference.chains import sight_lines
+    from objslam_mapper.inference.start import initial_association
     from objslam_mapper.inference.target import AssociationTarget, TargetOptions
     from objslam_mapper.inference.tracklets import tracklets_of_problem
     from objslam_tools.bench.naive import time_naive_solves
