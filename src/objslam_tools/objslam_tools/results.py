@@ -124,36 +124,63 @@ def evaluate(
     config: Any,
     detector_config: Any,
 ) -> list[Row]:
-    """Map every scenario with every association and score each map."""
+    """Map every scenario with every association and score each map. The sampler's chains run
+    as ``objslam map`` runs them (on a local Ray for several), one Ray for all maps."""
     from objslam_common.catalog import load_catalog
+    from objslam_mapper.parallel import chain_runner
+
+    catalog = load_catalog(config.catalog_file or None)
+    runner = chain_runner(config.parallel, config.sampler.chains) if "sampler" in associations else None
+    try:
+        return [
+            row
+            for scenario in scenarios
+            for row in _scenario_rows(
+                scenario, associations, bag_of(scenario), config, detector_config, catalog, runner
+            )
+        ]
+    finally:
+        close = getattr(runner, "close", None)
+        if close is not None:
+            close()
+
+
+def _scenario_rows(
+    scenario: Scenario,
+    associations: Sequence[str],
+    bag_path: Path,
+    config: Any,
+    detector_config: Any,
+    catalog: Any,
+    runner: Any,
+) -> list[Row]:
+    """One scenario's maps, one per association from one run of the detector, scored."""
     from objslam_tools.bag import open_bag
     from objslam_tools.evaluate import load_reference, score_map
     from objslam_tools.mapping import bag_inputs, build_association_map, oracle_truth
 
-    catalog = load_catalog(config.catalog_file or None)
+    bag = open_bag(bag_path)
+    inputs = bag_inputs(bag, detector_config, catalog, mount=config.camera_mount)
+    reference = load_reference(bag.path)
+    truth = oracle_truth(bag) if "oracle" in associations else None
     rows = []
-    for scenario in scenarios:
-        bag = open_bag(bag_of(scenario))
-        inputs = bag_inputs(bag, detector_config, catalog, mount=config.camera_mount)
-        reference = load_reference(bag.path)
-        truth = oracle_truth(bag) if "oracle" in associations else None
-        for association in associations:
-            built = build_association_map(inputs, association, config, catalog, truth=truth)
-            score = score_map(built, reference, name=association)
-            metrics = {
-                **score.metrics(),
-                **chain_metrics(built, config.sampler.chains if association == "sampler" else 0),
-            }
-            rows.append(
-                Row(
-                    scenario.label,
-                    association,
-                    metrics,
-                    built.diagnostics["wall_time_s"],
-                    scenario.camera,
-                    error_notes(score),
-                )
+    for association in associations:
+        sampler = association == "sampler"
+        built = build_association_map(
+            inputs, association, config, catalog, truth=truth, runner=runner if sampler else None
+        )
+        score = score_map(built, reference, name=association)
+        metrics = {**score.metrics(), **chain_metrics(built, config.sampler.chains if sampler else 0)}
+        rows.append(
+            Row(
+                scenario.label,
+                association,
+                metrics,
+                built.diagnostics["wall_time_s"],
+                scenario.camera,
+                error_notes(score),
             )
+        )
     return rows
 
 
