@@ -221,11 +221,11 @@ def run(args: argparse.Namespace) -> int:
     }
     if args.batch:
         result["batch"] = _batch(args)
-    print(json.dumps(result, indent=2) if args.json else _table(result))
+    print(json.dumps(result, indent=2) if args.json else format_table(result))
     return 0
 
 
-def _table(r: dict[str, Any]) -> str:
+def format_table(r: dict[str, Any]) -> str:
     def ok(good: bool) -> str:
         return "ok" if good else "MISSED"
 
