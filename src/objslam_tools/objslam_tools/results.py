@@ -136,7 +136,13 @@ def evaluate(
             row
             for scenario in scenarios
             for row in _scenario_rows(
-                scenario, associations, bag_of(scenario), config, detector_config, catalog, runner
+                scenario,
+                associations,
+                bag_path=bag_of(scenario),
+                config=config,
+                detector_config=detector_config,
+                catalog=catalog,
+                runner=runner,
             )
         ]
     finally:
@@ -148,6 +154,7 @@ def evaluate(
 def _scenario_rows(
     scenario: Scenario,
     associations: Sequence[str],
+    *,
     bag_path: Path,
     config: Any,
     detector_config: Any,
