@@ -464,9 +464,16 @@ class ScreenConfig:
         minimum=1e-6,
         maximum=1.0,
     )
+    far_join_m: float = setting(
+        3.0,
+        "a move that joins or parts tracklets this far apart (m; rough positions or lines of sight) always "
+        "gets a graph solve: a wrong far join bends the poses the screen is judged at (0: never)",
+        minimum=0.0,
+    )
 
 
 CHAIN_STARTS = ("heuristic", "singletons", "greedy", "clutter", "random")
+POOLINGS = ("target", "counts")
 
 
 @dataclass(frozen=True)
@@ -490,6 +497,13 @@ class SamplerConfig:
         "clutter cleared), singletons (every tracklet its own object), greedy (nearest neighbour with a "
         "Mahalanobis gate), clutter (every tracklet clutter), random (a random association); chains beyond "
         "the list start random",
+        expert=True,
+    )
+    pooling: str = setting(
+        "target",
+        "how the chains' kept states make the map: target (each distinct kept state weighted by its target "
+        "value, so a chain stuck far below the others adds nothing) or counts (by how often the chains kept "
+        "it: paper Algorithm 1 over the pooled samples)",
         expert=True,
     )
     rhat_max: float = setting(
@@ -562,6 +576,8 @@ class SamplerConfig:
         unknown = [s for s in self.starts if s not in CHAIN_STARTS]
         if unknown:
             raise ValueError(f"unknown chain start {unknown[0]!r} (one of {', '.join(CHAIN_STARTS)})")
+        if self.pooling not in POOLINGS:
+            raise ValueError(f"pooling must be one of {', '.join(POOLINGS)}, got {self.pooling!r}")
 
 
 @dataclass(frozen=True)

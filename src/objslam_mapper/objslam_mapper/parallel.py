@@ -19,7 +19,8 @@ import logging
 import os
 import socket
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from objslam_mapper.config import ParallelConfig
@@ -204,3 +205,14 @@ def chain_runner(config: ParallelConfig, chains: int, address: str | None = None
     if chains <= 1 or config.backend == "inprocess":
         return InProcess()
     return RayRunner(ray_address(config, address), config.workers)
+
+
+@contextmanager
+def running_chains(config: ParallelConfig, chains: int, address: str | None = None) -> Iterator[ChainRunner]:
+    """:func:`chain_runner`'s runner, closed (a local Ray it started shut down) when the block ends."""
+    runner = chain_runner(config, chains, address)
+    try:
+        yield runner
+    finally:
+        if isinstance(runner, RayRunner):
+            runner.close()

@@ -127,11 +127,10 @@ def evaluate(
     """Map every scenario with every association and score each map. The sampler's chains run
     as ``objslam map`` runs them (on a local Ray for several), one Ray for all maps."""
     from objslam_common.catalog import load_catalog
-    from objslam_mapper.parallel import chain_runner
+    from objslam_mapper.parallel import running_chains
 
     catalog = load_catalog(config.catalog_file or None)
-    runner = chain_runner(config.parallel, config.sampler.chains) if "sampler" in associations else None
-    try:
+    with running_chains(config.parallel, config.sampler.chains) as runner:
         return [
             row
             for scenario in scenarios
@@ -145,10 +144,6 @@ def evaluate(
                 runner=runner,
             )
         ]
-    finally:
-        close = getattr(runner, "close", None)
-        if close is not None:
-            close()
 
 
 def _scenario_rows(
@@ -199,14 +194,7 @@ def chain_metrics(built: Any, chains: int) -> dict[str, Any]:
         return {"chains": None}
     convergence = built.diagnostics.get("convergence") or {}
     identities = [*built.objects, *built.rejected]
-    agreeing = (
-        sum(
-            all((o.existence_by_chain[k] > 0.5) == (o.existence_probability > 0.5) for o in identities)
-            for k in range(chains)
-        )
-        if chains > 1 and all(len(o.existence_by_chain) == chains for o in identities)
-        else None
-    )
+    agreeing = _chains_agreeing(identities, chains) if chains > 1 else None
     rhat = convergence.get("rhat_max")
     return {
         "chains": chains,
@@ -214,6 +202,17 @@ def chain_metrics(built: Any, chains: int) -> dict[str, Any]:
         "ess_min": convergence.get("ess_bulk_min"),
         "chains_agreeing": agreeing,
     }
+
+
+def _chains_agreeing(identities: Sequence[Any], chains: int) -> int | None:
+    """Chains that put every identity on the pooled side of 1/2 (None: per-chain values missing)."""
+    if any(len(o.existence_by_chain) != chains for o in identities):
+        return None
+    pooled = [o.existence_probability > 0.5 for o in identities]
+    return sum(
+        all((o.existence_by_chain[k] > 0.5) == side for o, side in zip(identities, pooled, strict=True))
+        for k in range(chains)
+    )
 
 
 def error_notes(score: Any) -> tuple[str, ...]:

@@ -19,6 +19,7 @@ from objslam_mapper.inference.detection import (
     camera_view,
     detection_log_likelihood,
     hidden,
+    shared_hits,
     sight,
     sightings,
     table_sight,
@@ -79,6 +80,35 @@ def test_things_that_share_floor_space_do_not_hide_each_other():
         seen = sight(_Problem(), np.array(ROBOT, dtype=float), things, CONFIG, VIEW)
         tables = table_sight(_Problem(), np.array(ROBOT, dtype=float), things, np.array([True, False]), CONFIG)
         assert hidden(seen, Sight.join([seen, tables]), CONFIG)[0, 1] == expected
+
+
+def test_fragments_of_one_distractor_share_their_hits_and_objects_do_not():
+    # Ten images of four things: a poster seen as two tracklets (two distractors of one class at one
+    # place), a distractor of that class elsewhere, and an object where the poster is.
+    poses = np.column_stack([np.linspace(0.0, 1.0, 10), np.full(10, -2.0), np.zeros(10)])
+    first, second = [2.0, 1.0, 0.5, 0.6, 0.6], [2.1, 1.05, 0.5, 0.5, 0.6]
+    elsewhere, on_it = [-2.0, 1.0, 0.5, 0.6, 0.6], [2.0, 1.0, 0.0, 0.3, 0.6]
+    things = np.array([first, second, elsewhere, on_it])
+    # Slices: the first fragment in images 0-4, the second in 5-9, the other and the object in 0-4.
+    problem = _Problem(measurement_pose=[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 0, 1, 2, 3, 4, 0, 1, 2, 3, 4])
+    groups = [np.arange(0, 5), np.arange(5, 10), np.arange(10, 15), np.arange(15, 20)]
+    kin = np.array([3, 3, 3, -1])  # the three distractors share a class; the object is no distractor
+    seen = sightings(problem, poses, things, groups, CONFIG, EVERYWHERE_BUT_HIGH, kin=kin)
+    assert seen.sight.in_view.all() and not seen.hidden.any()
+    # Together the fragments are seen in every image; the distractor elsewhere and the object, which
+    # stands where the fragments do, keep their own five misses each.
+    assert seen.missed.sum(axis=0).tolist() == [0, 0, 5, 5]
+    # Without sharing, each fragment misses the other's five images.
+    alone = sightings(problem, poses, things, groups, CONFIG, EVERYWHERE_BUT_HIGH)
+    assert alone.missed.sum(axis=0).tolist() == [5, 5, 5, 5]
+    # Another class at the same place shares nothing.
+    hit = np.eye(2, dtype=bool)
+    footprint = np.array([[0.0, 0.0], [0.0, 0.0], [0.3, 0.3]])
+    assert shared_hits(hit, footprint, np.array([3, 4])).tolist() == hit.tolist()
+    assert shared_hits(hit, footprint, np.array([3, 3])).tolist() == [[True, True], [True, True]]
+
+
+EVERYWHERE_BUT_HIGH = View(1.5)
 
 
 def test_too_narrow_too_far_or_above_the_view_is_not_in_view():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -50,12 +52,19 @@ def _state_noise(state, other, scale):
 @pytest.mark.parametrize(
     ("screen_error", "margins"),
     [
-        (0.0, (0.0, 0.0, 0.0, None)),
-        (2.0, (0.0, 0.0, 0.0, None)),
-        (2.0, (1.0, 0.3, 0.2, None)),
-        (4.0, (0, 0, 0.02, 0.3)),
+        (0.0, (0.0, 0.0, 0.0, None, 0.0)),
+        (2.0, (0.0, 0.0, 0.0, None, 0.0)),
+        (2.0, (1.0, 0.3, 0.2, None, 0.0)),
+        (4.0, (0, 0, 0.02, 0.3, 0.0)),
+        (4.0, (0, 0, 0.02, 0.3, 1.5)),
     ],
-    ids=["exact-screen", "poor-screen", "poor-screen-with-margins-and-floor", "bad-screen-with-a-join-floor"],
+    ids=[
+        "exact-screen",
+        "poor-screen",
+        "poor-screen-with-margins-and-floor",
+        "bad-screen-with-a-join-floor",
+        "bad-screen-far-joins-always-solved",
+    ],
 )
 def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_error, margins):
     from objslam_mapper.config import ScreenConfig
@@ -84,6 +93,7 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
             relative_margin=margins[1],
             floor=margins[2],
             join_floor=margins[2] if margins[3] is None else margins[3],
+            far_join_m=margins[4],
         ),
     )
     result = sampler.run(Association.of([CLUTTER] * 4), 50_000, 1000, np.random.default_rng(100), keep_trace=False)
@@ -94,6 +104,28 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
     assert len(exact.states) == len(enumerate_associations(labels, True))
     screened = sum(s.screened_out for s in result.moves.values())
     assert calls and screened > 0
+
+
+def test_moves_that_join_or_part_tracklets_far_apart_are_always_solved():
+    from objslam_mapper.config import ScreenConfig
+    from objslam_mapper.inference.association import CLUTTER, Association
+    from objslam_mapper.inference.chain import MetropolisHastings
+
+    # Two red tracklets 0.5 m apart and a third 10 m away.
+    sampler = MetropolisHastings(
+        ["r", "r", "r"],
+        lambda state: 0.0,
+        positions_xy_m=[[0.0, 0.0], [0.5, 0.0], [10.0, 0.0]],
+        screen=lambda state, new: -100.0,
+        screen_config=ScreenConfig(floor=0.01, join_floor=0.1, far_join_m=3.0),
+    )
+    all_one, far_one_apart = Association.of([0, 0, 0]), Association.of([0, 0, 1])
+    assert sampler._log_floor(all_one, far_one_apart) == 0.0  # parting the far one
+    assert sampler._log_floor(far_one_apart, all_one) == 0.0  # joining it
+    assert sampler._log_floor(Association.of([0, 0, CLUTTER]), all_one) == 0.0  # from clutter, far
+    near_apart = Association.of([0, 1, 2])
+    assert sampler._log_floor(near_apart, far_one_apart) == pytest.approx(math.log(0.1))  # a near join
+    assert sampler._log_floor(near_apart, Association.of([0, 1, CLUTTER])) == pytest.approx(math.log(0.01))
 
 
 @pytest.mark.slow

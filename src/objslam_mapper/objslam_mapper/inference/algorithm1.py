@@ -199,7 +199,7 @@ def _mean_calibration(weighted: Sequence[tuple[SampleSummary, float]]) -> dict[s
 
 
 def build_from_samples(
-    samples: Iterable[tuple[SampleSummary, int]],
+    samples: Iterable[tuple[SampleSummary, float]],
     stamps_ns: Sequence[int] | NDArray[np.int64],
     *,
     spurious_location_stddev_m: float = 0.30,
@@ -227,7 +227,7 @@ def build_from_samples(
 
 
 def map_and_yields(
-    samples: Iterable[tuple[SampleSummary, int]],
+    samples: Iterable[tuple[SampleSummary, float]],
     stamps_ns: Sequence[int] | NDArray[np.int64],
     *,
     spurious_location_stddev_m: float = 0.30,
@@ -241,7 +241,7 @@ def map_and_yields(
     identities: dict[frozenset[int], _Identity] = {}
     trajectories: list[tuple[NDArray[np.float64], float]] = []
     calibrations: list[tuple[SampleSummary, float]] = []
-    total = 0
+    total: float = 0
     yielded: list[set[frozenset[int]]] = []
     for summary, count in samples:
         yielded.append(set())
@@ -296,7 +296,7 @@ def map_and_yields(
     info = dict(diagnostics or {})
     info.update(
         {
-            "map_samples": int(total),
+            "map_samples": int(total) if float(total).is_integer() else round(float(total), 6),
             "identities": len(identities),
             "identity_overlap": float(identity_overlap),
             "spurious_location_stddev_m": float(spurious_location_stddev_m),

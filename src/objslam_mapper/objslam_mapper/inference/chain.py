@@ -142,14 +142,19 @@ class Acceptance(NamedTuple):
     at_floor: bool  # it passed the screen only by the screen's floor
 
 
-def _joins(state: Association, new: Association) -> bool:
-    """Whether an object of ``new`` holds tracklets of two objects of ``state`` (or an object's
-    and a clutter tracklet)."""
+def _joined_parts(state: Association, new: Association) -> list[tuple[list[int], list[int]]]:
+    """Pairs of tracklet sets that an object of ``new`` joins: of two objects of ``state``, or an
+    object's and a clutter tracklet (each part against the rest of its new object)."""
+    joined = []
     for group in new.groups:
-        owners = {state.assignment[t] if state.assignment[t] != CLUTTER else (CLUTTER, t) for t in group}
-        if len(owners) > 1:
-            return True
-    return False
+        parts: dict[object, list[int]] = {}
+        for t in group:
+            owner = state.assignment[t]
+            parts.setdefault(owner if owner != CLUTTER else (CLUTTER, t), []).append(t)
+        if len(parts) > 1:
+            sets = list(parts.values())
+            joined += [(part, [t for other in sets if other is not part for t in other]) for part in sets[:-1]]
+    return joined
 
 
 class MetropolisHastings:
@@ -186,6 +191,7 @@ class MetropolisHastings:
                 raise SamplerError(f"screen {name} must lie in [0, 1], got {value}")
         self._log_screen_floor = math.log(config.floor) if config.floor > 0.0 else -math.inf
         self._log_join_floor = math.log(config.join_floor) if config.join_floor > 0.0 else -math.inf
+        self._far_join_m = config.far_join_m
         self.target = log_target if isinstance(log_target, CachedLogTarget) else CachedLogTarget(log_target)
 
     # ---- the chain ---------------------------------------------------------------
@@ -217,10 +223,18 @@ class MetropolisHastings:
         A join may close a loop; a part may open a wrong one (on ``office`` a chain from the
         greedy start kept a poster's tracklet in an object 5.5 m away: the screen, at the poses
         that join had bent, judged its leaving -222 nats, the target +1654). Neither shows
-        at fixed poses."""
-        if _joins(state, new) or _joins(new, state):
-            return self._log_join_floor
-        return self._log_screen_floor
+        at fixed poses. A move that joins or parts tracklets more than ``far_join_m`` apart is
+        always solved: on ``clutter`` chains from the singleton and greedy starts kept a red
+        tracklet in an object 6 m away, whose leaving the screen judged -256 nats and the
+        target +1467, and stayed 3700 nats below the others after 6000 steps."""
+        joined = _joined_parts(state, new) + _joined_parts(new, state)
+        if not joined:
+            return self._log_screen_floor
+        if self._far_join_m > 0.0 and any(
+            self.proposals.tracklet_distance_m(a, b) > self._far_join_m for a, b in joined
+        ):
+            return 0.0
+        return self._log_join_floor
 
     def _first_stage(self, log_ratio: float, log_floor: float) -> float:
         """log alpha_1 of a screen log ratio: loosened by the margins, clamped to [log floor, 0]."""

@@ -22,7 +22,7 @@ from objslam_mapper.config import SamplerConfig
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.inference.algorithm1 import build_from_samples, map_and_yields
 from objslam_mapper.inference.association import Association
-from objslam_mapper.inference.chains import ChainOutcome, ChainRunner, ChainTask, InProcess, chain_specs
+from objslam_mapper.inference.chains import ChainOutcome, ChainRunner, ChainTask, InProcess, chain_specs, pooled_samples
 from objslam_mapper.inference.convergence import chain_convergence
 from objslam_mapper.inference.diagnostics import (
     PhaseProgress,
@@ -99,7 +99,7 @@ def finish(inference: Inference, outcomes: Sequence[ChainOutcome]) -> BuiltMap:
 
     watch.report("mapping", 0, 1)
     built, yields = map_and_yields(
-        [sample for outcome in outcomes for sample in outcome.samples],
+        pooled_samples(outcomes, config.pooling),
         problem.stamps_ns,
         spurious_location_stddev_m=config.spurious_location_stddev_m,
         existence_threshold=config.existence_threshold,
@@ -117,6 +117,8 @@ def finish(inference: Inference, outcomes: Sequence[ChainOutcome]) -> BuiltMap:
     watch.lap("mapping")
     diagnostics = {
         **built.diagnostics,
+        "map_samples": sum(sum(o.result.counts.values()) for o in outcomes),
+        "pooling": config.pooling,
         "convergence": convergence.to_dict(),
         **work_diagnostics(outcomes),
         "timings_s": timings(watch, outcomes),

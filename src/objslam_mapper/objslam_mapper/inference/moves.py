@@ -250,6 +250,13 @@ class Proposals:
         to_ray = ((offset - along[:, None] * direction) ** 2).sum(-1)
         return np.minimum(d2, to_ray)
 
+    def tracklet_distance_m(self, a: Sequence[int], b: Sequence[int]) -> float:
+        """The least distance between a tracklet of ``a`` and one of ``b``, each way as
+        :meth:`_tracklet_distance2` measures it (rough positions, lines of sight)."""
+        there = min(float(self._tracklet_distance2(t, self.positions[list(b)]).min()) for t in a)
+        back = min(float(self._tracklet_distance2(t, self.positions[list(a)]).min()) for t in b)
+        return math.sqrt(min(there, back))
+
     def _seed_side_probs(self, xy: NDArray[np.float64], d2_a: NDArray, d2_b: NDArray) -> NDArray[np.float64]:
         """P(member joins seed a's side) from squared distances to the seeds a and b.
 

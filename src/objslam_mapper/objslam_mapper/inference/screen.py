@@ -36,7 +36,15 @@ from numpy.typing import NDArray
 from objslam_mapper.graph.conditional_evidence import object_evidence
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.inference.association import Association
-from objslam_mapper.inference.detection import Sight, hit_matrix, miss_count_log_likelihood, sight, table_sight, visible
+from objslam_mapper.inference.detection import (
+    Sight,
+    hit_matrix,
+    miss_count_log_likelihood,
+    shared_hits,
+    sight,
+    table_sight,
+    visible,
+)
 from objslam_mapper.inference.exclusion import near_pairs, no_overlap_log_probability
 from objslam_mapper.inference.target import OBJECT, AssociationTarget, GraphGroup, estimates
 
@@ -136,31 +144,42 @@ class ProposalScreen:
         self, state: Association, old_groups: list[GraphGroup], new_groups: list[GraphGroup]
     ) -> float:
         """Change of the detection term from ``state`` (graph groups ``old_groups``) to the
-        association of ``new_groups`` over the groups the move changes, at the screen's
-        fixed poses and estimates (their effect on hiding the others is left to the target:
-        see the module docstring)."""
+        association of ``new_groups`` over the groups the move changes, and over the kept
+        distractors when the move adds or takes one (they share hits: detection.shared_hits),
+        at the screen's fixed poses and estimates (how the move changes what hides the others
+        is left to the target: see the module docstring)."""
+        target = self.target
         poses, _, estimates = self._reference(state)
-        seen = self.target.sightings(state, poses, estimates)
+        seen = target.sightings(state, poses, estimates)
         old_set, new_set = set(old_groups), set(new_groups)
         lost = [k for k, g in enumerate(old_groups) if g not in new_set]
         kept = [k for k, g in enumerate(old_groups) if g in new_set]
         gained = [g for g in new_groups if g not in old_set]
-        n_miss = -int(np.count_nonzero(seen.missed[:, lost])) if lost else 0
+        shown = np.zeros((len(poses), 0), dtype=bool)
+        footprints = np.zeros((3, 0))
+        gained_members = [target.measurements(g) for g in gained]
+        gained_estimates = np.array([self._conditional(state, g)[1] for g in gained]).reshape(-1, 5)
+        gained_kin = target.kin(gained, gained_estimates)
+        old_kin = target.kin(old_groups, estimates)
+        touches_kin = bool((old_kin[lost] >= 0).any() or (gained_kin >= 0).any())
+        recount = [k for k in kept if old_kin[k] >= 0] if touches_kin else []
+        n_miss = -int(np.count_nonzero(seen.missed[:, lost + recount]))
         if gained:
-            gained_estimates = np.array([self._conditional(state, g)[1] for g in gained])
-            gained_members = [self.target.measurements(g) for g in gained]
-            fresh = sight(self.target.problem, poses, gained_estimates, self.target.detection, self.target.view)
+            fresh = sight(target.problem, poses, gained_estimates, target.detection, target.view)
             fresh_tables = table_sight(
-                self.target.problem,
-                poses,
-                gained_estimates,
-                self.target.on_table(gained, gained_members),
-                self.target.detection,
+                target.problem, poses, gained_estimates, target.on_table(gained, gained_members), target.detection
             )
-            shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), self.target.detection)
-            hit = hit_matrix(self.target.problem, len(poses), gained_members)
-            n_miss += int(np.count_nonzero(shown & ~hit))
-        return miss_count_log_likelihood(n_miss, self.target.detection)
+            shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), target.detection)
+            footprints = fresh.footprints()
+        recounted = [target.measurements(old_groups[k]) for k in recount]
+        hit = shared_hits(
+            hit_matrix(target.problem, len(poses), recounted + gained_members),
+            np.hstack([seen.sight.footprints()[:, recount], footprints]),
+            np.concatenate([old_kin[recount], gained_kin]),
+        )
+        should = np.hstack([seen.sight.in_view[:, recount] & ~seen.hidden[:, recount], shown])
+        n_miss += int(np.count_nonzero(should & ~hit))
+        return miss_count_log_likelihood(n_miss, target.detection)
 
     def __call__(self, state: Association, new: Association) -> float:
         """Approximate ``log P(new|Z) - log P(state|Z)``: poses fixed at ``state``'s MAP.

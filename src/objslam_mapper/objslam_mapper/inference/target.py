@@ -61,6 +61,10 @@ NO_OBJECT_LOG_EVIDENCE = 0.0
 
 SIGHTINGS_CACHE_SIZE = 1024
 
+# A distractor whose shape is this many class-prior standard deviations off its class's is
+# no object of the class seen in fragments (it shares its hits with the others of its kind).
+UNLIKE_CLASS_SIGMAS = 3.0
+
 # A group of an association's factor graph: an object (its tracklets) or a distractor (one clutter tracklet).
 GraphGroup = tuple[str, tuple[int, ...]]
 OBJECT = "object"
@@ -168,6 +172,25 @@ class AssociationTarget:
             dtype=bool,
         )
 
+    def kin(self, groups: Sequence[GraphGroup], estimates: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Which of ``groups`` (at ``estimates``, (K, 5)) share their hits in the detection term
+        (objslam_mapper.inference.detection.shared_hits): a distractor unlike any object of its
+        class gets its class's distractor prior row, the rest -1. Unlike: its base height, diameter
+        or height more than UNLIKE_CLASS_SIGMAS of the class prior from the class's. A thing shaped
+        like its class is left to pay its own misses: its tracklets can join as one object, and
+        sharing would let a real object escape into fragments that pay the misses of one thing
+        with the freedom of several."""
+        kin = np.full(len(groups), -1, dtype=np.int64)
+        for k, g in enumerate(groups):
+            if g[0] != DISTRACTOR:
+                continue
+            first = int(self._members[g[1][0]][0])
+            row = int(self.problem.measurement_label[first])
+            sigmas = np.abs(estimates[k, 2:] - self.problem.prior_mean[row, 2:]) / self.problem.prior_stddev[row, 2:]
+            if float(sigmas.max()) > UNLIKE_CLASS_SIGMAS:
+                kin[k] = self.clutter.distractor_row(first)
+        return kin
+
     def groups(self, state: Association) -> list[NDArray[np.int64]]:
         """Measurement indices of each object of ``state``, in its object order."""
         return [self.measurements((OBJECT, g)) for g in state.groups]
@@ -259,7 +282,16 @@ class AssociationTarget:
         groups = self.graph_groups(state)
         members = [self.measurements(g) for g in groups]
         on_table = self.on_table(groups, members)
-        seen = sightings(self.problem, map_T_base, estimates, members, self.detection, self.view, on_table=on_table)
+        seen = sightings(
+            self.problem,
+            map_T_base,
+            estimates,
+            members,
+            self.detection,
+            self.view,
+            on_table=on_table,
+            kin=self.kin(groups, estimates),
+        )
         self._sights[state] = (map_T_base, seen)
         if len(self._sights) > SIGHTINGS_CACHE_SIZE:
             self._sights.popitem(last=False)

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
-    from objslam_mapper.parallel import chain_runner
+    from objslam_mapper.parallel import running_chains
     from objslam_tools.bag import open_bag
     from objslam_tools.mapping import (
         bag_inputs,
@@ -91,15 +91,10 @@ def run(args: argparse.Namespace) -> int:
         elif phase == "association":
             associating(done, total)
 
-    runner = chain_runner(config.parallel, config.sampler.chains, args.ray) if args.association == "sampler" else None
-    try:
+    with running_chains(config.parallel, config.sampler.chains, args.ray) as runner:
         built = build_association_map(
             inputs, args.association, config, catalog, truth=truth, progress=progress, runner=runner
         )
-    finally:
-        close = getattr(runner, "close", None)
-        if close is not None:
-            close()
     write_map(out, built)
     elapsed = built.diagnostics["wall_time_s"]
     print(

@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
-    from objslam_mapper.parallel import RayRunner, chain_runner
+    from objslam_mapper.parallel import RayRunner, running_chains
     from objslam_mapper.pipeline import build_maps
     from objslam_tools.bag import open_bag
     from objslam_tools.errors import UserError
@@ -79,8 +79,7 @@ def run(args: argparse.Namespace) -> int:
     detector_config = load_config(DetectorConfig, args.detector_params, "detector")
 
     # Many bags are parallel work even with one chain each: a Ray runner whatever the chain count.
-    runner = chain_runner(config.parallel, max(2, config.sampler.chains), args.ray)
-    try:
+    with running_chains(config.parallel, max(2, config.sampler.chains), args.ray) as runner:
         if isinstance(runner, RayRunner):
             ray = runner.ray()
             detect = ray.remote(num_cpus=1)(_detect)
@@ -97,10 +96,6 @@ def run(args: argparse.Namespace) -> int:
             runner=runner,
             mounts=[i.camera_mount for i in inputs],
         )
-    finally:
-        close = getattr(runner, "close", None)
-        if close is not None:
-            close()
     elapsed = time.monotonic() - started
     print(f"{'bag':24s} {'objects':>7s} {'rejected':>8s}  {'converged':9s} {'R-hat max':>9s} {'chains s':>9s}")
     for name, built, read in zip(names, maps, inputs, strict=True):
