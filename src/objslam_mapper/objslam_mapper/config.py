@@ -413,6 +413,12 @@ class MoveConfig:
     reassign: float = setting(0.3, "probability of moving one tracklet to another or a new object", minimum=0.0)
     to_clutter: float = setting(0.15, "probability of moving one tracklet to the clutter set", minimum=0.0)
     from_clutter: float = setting(0.15, "probability of moving a clutter tracklet into an object", minimum=0.0)
+    dissolve: float = setting(
+        0.05, "probability of moving every tracklet of an object (of two or more) to the clutter set", minimum=0.0
+    )
+    gather: float = setting(
+        0.05, "probability of making a new object of two or more clutter tracklets of one class", minimum=0.0
+    )
     distance_scale_m: float = setting(
         1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
     )
@@ -436,6 +442,8 @@ class MoveConfig:
             raise ValueError("merge and split are each other's reverse: both or neither must be > 0")
         if (self.to_clutter > 0.0) != (self.from_clutter > 0.0):
             raise ValueError("to_clutter and from_clutter are each other's reverse: both or neither must be > 0")
+        if (self.dissolve > 0.0) != (self.gather > 0.0):
+            raise ValueError("dissolve and gather are each other's reverse: both or neither must be > 0")
 
 
 @dataclass(frozen=True)

@@ -144,13 +144,13 @@ def test_proposals_respect_classes_and_clutter_switch():
 # ---- the chain against the exact distribution -------------------------------------------
 
 
-def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False):
+def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False, moves=None):
     states, scores, positions, weights = random_problem(labels, seed=seed, clutter=clutter)
     exact = ExactDistribution.of(states, scores.__getitem__)
     sampler = MetropolisHastings(labels, scores.__getitem__)
     lines = random_sight_lines(len(labels), seed + 50) if sight_lines else None
     sampler.proposals = proposals_cls(
-        labels, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter, sight_lines=lines
+        labels, moves, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter, sight_lines=lines
     )
     start = Association.of([CLUTTER] * len(labels) if clutter else range(len(labels)))
     result = sampler.run(start, steps, 1000, np.random.default_rng(100 + seed), keep_trace=False)
@@ -206,13 +206,36 @@ class HalvesBipartitions(Proposals):
         return super()._log_bipartition(members, side_p) - math.log(2.0)
 
 
+class GathersFromOneSeed(Proposals):
+    """Broken on purpose: a gather's probability counts only the pair it was drawn from, not
+    every (seed, second) pair that gives the same object."""
+
+    def _log_gather(self, view, members):
+        return super()._log_gather(view, members) - math.log(len(members) * (len(members) - 1))
+
+
+# Group moves on their own (no merge/split), so a wrong gather ratio is not washed out.
+GROUP_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve=0.3, gather=0.3)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("broken", [ForgetsReverseDestination, HalvesBipartitions])
-def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken):
+@pytest.mark.parametrize(
+    ("broken", "moves"),
+    [
+        (ForgetsReverseDestination, None),
+        (HalvesBipartitions, MoveConfig(dissolve=0.0, gather=0.0)),
+        (GathersFromOneSeed, GROUP_MOVES),
+    ],
+)
+def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken, moves):
     """The exact comparison above has the power to see a wrong ratio."""
-    labels, clutter, seed, steps = CASES["2+2 tracklets, clutter"]
-    tv, _ = run_chain(broken, labels, clutter, seed, steps)
+    labels, clutter, seed, steps = (
+        CASES["3+2 tracklets, clutter"] if moves is GROUP_MOVES else CASES["2+2 tracklets, clutter"]
+    )
+    tv, _ = run_chain(broken, labels, clutter, seed, steps, moves=moves)
     assert tv > 0.08
+    if moves is GROUP_MOVES:  # the same moves, unbroken, pass
+        assert run_chain(Proposals, labels, clutter, seed, steps, moves=moves)[0] < 0.05
 
 
 # ---- the run's bookkeeping ----------------------------------------------------------------
@@ -251,7 +274,7 @@ def test_run_is_deterministic_for_a_seed_and_reports_progress():
     accepted = sum(s.accepted for s in a.moves.values())
     assert len(moves) == 2 * (accepted + 1)
     assert a.distinct_visited == len(set(moves[: accepted + 1]))
-    assert set(a.acceptance_rates) == {"merge", "split", "reassign", "to_clutter", "from_clutter"}
+    assert set(a.acceptance_rates) == {"merge", "split", "reassign", "to_clutter", "from_clutter", "dissolve", "gather"}
     assert 0.0 < a.overall_acceptance_rate < 1.0
     assert a.diagnostics()["kept_samples"] == 2500
 

@@ -6,7 +6,16 @@ come in reverse pairs so every proposal has an exact Hastings ratio:
 
 - ``merge`` two objects of one class  <->  ``split`` one object in two,
 - ``reassign`` one tracklet to another object or to a new object (its own reverse),
-- ``to_clutter`` a tracklet  <->  ``from_clutter`` a tracklet into an object or a new one.
+- ``to_clutter`` a tracklet  <->  ``from_clutter`` a tracklet into an object or a new one,
+- ``dissolve`` an object of two or more tracklets into clutter  <->  ``gather`` two or more
+  clutter tracklets of one class into a new object.
+
+The last pair moves a group at once, which single moves cannot do when the missed-detection
+term stands between: an object that is a poster seen in five tracklets loses hits (so pays
+misses) with each tracklet taken from it, and each such tracklet pays the misses of the others
+as a distractor. On ``clutter``, chains from the singleton and greedy starts held objects whose
+whole move to clutter the target preferred by 1300 to 2800 nats while every single tracklet's
+move cost 60 to 390, and they stayed 8500 nats below the other chains after 6000 steps.
 
 The move kind is drawn among the kinds possible in the current state (nothing to split,
 no clutter...) in proportion to configured weights, so P(m | J) depends on J. With a move m
@@ -46,13 +55,15 @@ from objslam_mapper.config import MoveConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
 
-MOVE_KINDS = ("merge", "split", "reassign", "to_clutter", "from_clutter")
+MOVE_KINDS = ("merge", "split", "reassign", "to_clutter", "from_clutter", "dissolve", "gather")
 REVERSE_MOVE = {
     "merge": "split",
     "split": "merge",
     "reassign": "reassign",
     "to_clutter": "from_clutter",
     "from_clutter": "to_clutter",
+    "dissolve": "gather",
+    "gather": "dissolve",
 }
 _NEW = -2  # destination key: a new object
 _CACHE_SIZE = 20_000  # per-state proposal weights kept
@@ -152,7 +163,7 @@ class Proposals:
         self.allow_clutter = allow_clutter
         probs = {kind: float(getattr(self.moves, kind)) for kind in MOVE_KINDS}
         if not allow_clutter:
-            probs["to_clutter"] = probs["from_clutter"] = 0.0
+            probs["to_clutter"] = probs["from_clutter"] = probs["dissolve"] = probs["gather"] = 0.0
         self.kind_weights = {k: p for k, p in probs.items() if p > 0.0}
         self._inv_two_scale2 = 0.5 / self.moves.distance_scale_m**2
         self._views: OrderedDict[Association, StateView] = OrderedDict()
@@ -205,6 +216,8 @@ class Proposals:
                 "reassign": len(self._movable(view)) > 0,
                 "to_clutter": len(view.state.clutter) < view.state.n_tracklets,
                 "from_clutter": len(view.state.clutter) > 0,
+                "dissolve": any(len(g) > 1 for g in view.groups),
+                "gather": len(self._gather_seeds(view)) > 0,
             }
             kinds = [k for k in self.kind_weights if possible[k]]
             view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
@@ -383,6 +396,64 @@ class Proposals:
         log_f += self._destinations(view, t).log_prob(dest)
         log_r = self._kinds(new).log_prob("to_clutter") - math.log(n_in_objects)
         return Proposal("from_clutter", new, log_f, log_r)
+
+    def _gather_seeds(self, view: StateView) -> list[int]:
+        """Clutter tracklets with another clutter tracklet of their class: where a gather starts."""
+        per_class = Counter(self.labels[t] for t in view.state.clutter)
+        return [t for t in view.state.clutter if per_class[self.labels[t]] > 1]
+
+    def _gather_parts(self, view: StateView, a: int) -> tuple[list[int], _Choice, NDArray[np.float64]]:
+        """From seed a: the other clutter tracklets of its class, the choice of the second
+        (by closeness to a) and each one's probability of joining after that."""
+        others = [t for t in view.state.clutter if t != a and self.labels[t] == self.labels[a]]
+        d2 = self._tracklet_distance2(a, self.positions[others])
+        second = _Choice(others, self._closeness(d2))
+        joins = self.moves.split_randomness * 0.5 + (1.0 - self.moves.split_randomness) * np.exp(
+            -d2 * self._inv_two_scale2
+        )
+        return others, second, joins
+
+    def _log_gather(self, view: StateView, members: Sequence[int]) -> float:
+        """log q of gathering exactly ``members`` (clutter tracklets of one class in ``view``),
+        without the kind factor: summed over every ordered (seed, second) pair that gives it."""
+        seeds = self._gather_seeds(view)
+        chosen = set(members)
+        terms = []
+        for a in members:
+            others, second, joins = self._gather_parts(view, a)
+            inside = np.array([t in chosen for t in others])
+            log_rest = np.where(inside, np.log(joins), np.log1p(-joins))
+            for k, b in enumerate(others):
+                if inside[k]:
+                    terms.append(second.log_prob(b) + float(log_rest.sum() - log_rest[k]))
+        return logsumexp(np.array(terms)) - math.log(len(seeds))
+
+    def _dissolvable(self, view: StateView) -> list[int]:
+        return [j for j, g in enumerate(view.groups) if len(g) > 1]
+
+    def _propose_dissolve(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        dissolvable = self._dissolvable(view)
+        members = view.groups[dissolvable[int(rng.integers(len(dissolvable)))]]
+        assignment = [CLUTTER if t in members else a for t, a in enumerate(view.assignment)]
+        new = self._view_of(assignment)
+        log_f = self._kinds(view).log_prob("dissolve") - math.log(len(dissolvable))
+        log_r = self._kinds(new).log_prob("gather") + self._log_gather(new, members)
+        return Proposal("dissolve", new, log_f, log_r)
+
+    def _propose_gather(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        seeds = self._gather_seeds(view)
+        a = seeds[int(rng.integers(len(seeds)))]
+        others, second, joins = self._gather_parts(view, a)
+        b = second.draw(rng)
+        drawn = rng.random(len(others)) < joins
+        members = sorted({a, b} | {t for t, on in zip(others, drawn, strict=True) if on})
+        assignment = list(view.assignment)
+        for t in members:
+            assignment[t] = len(view.groups)
+        new = self._view_of(assignment)
+        log_f = self._kinds(view).log_prob("gather") + self._log_gather(view, members)
+        log_r = self._kinds(new).log_prob("dissolve") - math.log(len(self._dissolvable(new)))
+        return Proposal("gather", new, log_f, log_r)
 
     def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
         """A proposal from ``view``'s state, or None when no move is possible there."""
