@@ -42,7 +42,10 @@ Distractors pay their misses as objects do, with one difference: a distractor is
 tracklet, and a poster seen as several tracklets is several distractors at one place, each of
 which would pay a miss in every image where only the others have slices. Distractors of one
 class whose footprints overlap therefore share their hits (:func:`shared_hits`): an image
-where one of them has a slice is no miss for the others. Without that, on ``clutter`` a
+where one of them has a slice is no miss for the others. Only distractors unlike any object
+of their class share (:meth:`~objslam_mapper.inference.target.AssociationTarget.kin`): a real
+object's tracklets could otherwise leave it for fragments that pay the misses of one thing
+with the freedom of several, and on ``clutter`` two real objects did. Without that, on ``clutter`` a
 cyan poster's tracklets paid 157 and 301 misses more each as distractors than as two cyan
 objects a metre in front of the wall, and the target mapped the poster twice at
 P = 1.00. Objects do not share hits: of two objects at one place one is a duplicate, and

@@ -14,8 +14,8 @@ The last pair moves a group at once, which single moves cannot do when the misse
 term stands between: an object that is a poster seen in five tracklets loses hits (so pays
 misses) with each tracklet taken from it, and each such tracklet pays the misses of the others
 as a distractor. On ``clutter``, chains from the singleton and greedy starts held objects whose
-whole move to clutter the target preferred by 1300 to 2800 nats while every single tracklet's
-move cost 60 to 390, and they stayed 8500 nats below the other chains after 6000 steps.
+whole move to clutter the target preferred by 300 to 2800 nats while every single tracklet's
+move cost 40 to 390, and they stayed 8500 nats below the other chains after 6000 steps.
 
 The move kind is drawn among the kinds possible in the current state (nothing to split,
 no clutter...) in proportion to configured weights, so P(m | J) depends on J. With a move m
