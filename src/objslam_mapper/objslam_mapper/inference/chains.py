@@ -19,6 +19,7 @@ a Ray task (:mod:`objslam_mapper.parallel`).
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
@@ -28,7 +29,6 @@ import numpy as np
 from objslam_mapper.config import SamplerConfig
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.inference.algorithm1 import SampleSummary
-from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.chain import ChainResult, MetropolisHastings
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.screen import ProposalScreen
@@ -118,9 +118,7 @@ def pooled_samples(outcomes: Sequence[ChainOutcome], pooling: str) -> list[tuple
         return [(summary, float(count)) for summary, count in samples]
     states = [state for outcome in outcomes for state in outcome.result.counts]
     values = np.array([value for outcome in outcomes for value in outcome.kept_log_targets()])
-    holders: dict[Association, int] = {}
-    for state in states:  # a state several chains kept is one state of the sum, its weight shared
-        holders[state] = holders.get(state, 0) + 1
+    holders = Counter(states)  # a state several chains kept is one state of the sum, its weight shared
     weights = np.exp(values - values.max()) / np.array([holders[state] for state in states])
     return [(summary, float(w)) for (summary, _), w in zip(samples, weights, strict=True)]
 

@@ -38,18 +38,7 @@ seen", at the MAP of ``J`` (:func:`sightings`):
   table hides it: the target preferred the duplicate by 13-21 nats on ``twins``; with
   them, the best states of unscreened chains with and without it score within a nat.
 
-Distractors pay their misses as objects do, with one difference: a distractor is one clutter
-tracklet, and a poster seen as several tracklets is several distractors at one place, each of
-which would pay a miss in every image where only the others have slices. Distractors of one
-class whose footprints overlap therefore share their hits (:func:`shared_hits`): an image
-where one of them has a slice is no miss for the others. Only distractors unlike any object
-of their class share (:meth:`~objslam_mapper.inference.target.AssociationTarget.kin`): a real
-object's tracklets could otherwise leave it for fragments that pay the misses of one thing
-with the freedom of several, and on ``clutter`` two real objects did. Without that, on ``clutter`` a
-cyan poster's tracklets paid 157 and 301 misses more each as distractors than as two cyan
-objects a metre in front of the wall, and the target mapped the poster twice at
-P = 1.00. Objects do not share hits: of two objects at one place one is a duplicate, and
-its misses are what gives it away. Otherwise distractors pay as objects do: else clutter would be an escape from the
+Distractors pay their misses as objects do: otherwise clutter would be an escape from the
 term (an object split in two across a loop misses in the images of the other half; as a
 distractor it would not), and the chain would clear real objects into it. A flat poster
 is not seen from behind, which a cylinder is: such misses make independent false alarms
@@ -58,6 +47,18 @@ visibility test gets wrong (lighting, a table's size, a thing half hidden) shows
 few misses of real objects; at the default ``P_d = 0.7`` a miss costs 1.2 nats, a slice an
 object owns is worth about 20 to it, so a real object is never lost to them, while a ghost
 in view of hundreds of images without a detection pays hundreds of nats.
+
+One exception: a distractor is one clutter tracklet, so a poster seen in several tracklets is
+several distractors at one place, each of which would pay a miss in every image where only
+the others have slices. On ``clutter`` a cyan poster's two tracklets paid 157 and 301 misses
+more as distractors than as two cyan objects a metre in front of the wall, and the target
+mapped the poster twice at P = 1.00. Distractors of one class whose footprints overlap
+therefore share their hits (:func:`shared_hits`): an image where one of them has a slice is
+no miss for the others. Only those unlike any object of their class share
+(:meth:`~objslam_mapper.inference.target.AssociationTarget.kin`): otherwise a real object's
+tracklets could leave it for fragments that pay the misses of one thing with the freedom of
+several (on ``clutter`` two real objects did). Objects never share hits: of two objects at
+one place one is a duplicate, and its misses are what gives it away.
 """
 
 from __future__ import annotations
@@ -300,6 +301,7 @@ class Sightings:
     tables: Sight
     hidden: NDArray[np.bool_]
     hit: NDArray[np.bool_]
+    kin: NDArray[np.int64]  # (K,) which share their hits (shared_hits; -1: none)
 
     @property
     def missed(self) -> NDArray[np.bool_]:
@@ -345,10 +347,9 @@ def sightings(
     k = seen.bearing.shape[1]
     tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
     covered = hidden(seen, Sight.join([seen, tables]), config)
-    hit = hit_matrix(problem, len(seen.in_view), groups)
-    if kin is not None:
-        hit = shared_hits(hit, seen.footprints(), kin)
-    return Sightings(seen, tables, covered, hit)
+    kin = np.full(k, -1, dtype=np.int64) if kin is None else np.asarray(kin, dtype=np.int64)
+    hit = shared_hits(hit_matrix(problem, len(seen.in_view), groups), seen.footprints(), kin)
+    return Sightings(seen, tables, covered, hit, kin)
 
 
 def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:

@@ -212,16 +212,21 @@ class Proposals:
         if view.kinds is None:
             possible = {
                 "merge": len(self._merges(view)) > 0,
-                "split": any(len(g) > 1 for g in view.groups),
+                "split": len(self._shared_objects(view)) > 0,
                 "reassign": len(self._movable(view)) > 0,
                 "to_clutter": len(view.state.clutter) < view.state.n_tracklets,
                 "from_clutter": len(view.state.clutter) > 0,
-                "dissolve": any(len(g) > 1 for g in view.groups),
+                "dissolve": len(self._shared_objects(view)) > 0,
                 "gather": len(self._gather_seeds(view)) > 0,
             }
             kinds = [k for k in self.kind_weights if possible[k]]
             view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
         return view.kinds
+
+    @staticmethod
+    def _shared_objects(view: StateView) -> list[int]:
+        """Objects of two or more tracklets: what a split or a dissolve takes."""
+        return [j for j, g in enumerate(view.groups) if len(g) > 1]
 
     def _movable(self, view: StateView) -> list[int]:
         """Tracklets in an object that can be reassigned: to a new object if they share
@@ -311,13 +316,13 @@ class Proposals:
         new = self._view_of([i if a == j else a for a in view.assignment])
         merged = new.groups[new.assignment[view.groups[i][0]]]
         side_p = np.array([view.assignment[t] == i for t in merged])
-        n_splittable = sum(len(g) > 1 for g in new.groups)
+        n_splittable = len(self._shared_objects(new))
         log_f = self._kinds(view).log_prob("merge") + merges.log_prob((i, j))
         log_r = self._kinds(new).log_prob("split") - math.log(n_splittable) + self._log_bipartition(merged, side_p)
         return Proposal("merge", new, log_f, log_r)
 
     def _propose_split(self, view: StateView, rng: np.random.Generator) -> Proposal:
-        splittable = [j for j, g in enumerate(view.groups) if len(g) > 1]
+        splittable = self._shared_objects(view)
         members = view.groups[splittable[int(rng.integers(len(splittable)))]]
         n = len(members)
         a = int(rng.integers(n))
@@ -428,11 +433,8 @@ class Proposals:
                     terms.append(second.log_prob(b) + float(log_rest.sum() - log_rest[k]))
         return logsumexp(np.array(terms)) - math.log(len(seeds))
 
-    def _dissolvable(self, view: StateView) -> list[int]:
-        return [j for j, g in enumerate(view.groups) if len(g) > 1]
-
     def _propose_dissolve(self, view: StateView, rng: np.random.Generator) -> Proposal:
-        dissolvable = self._dissolvable(view)
+        dissolvable = self._shared_objects(view)
         members = view.groups[dissolvable[int(rng.integers(len(dissolvable)))]]
         assignment = [CLUTTER if t in members else a for t, a in enumerate(view.assignment)]
         new = self._view_of(assignment)
@@ -452,7 +454,7 @@ class Proposals:
             assignment[t] = len(view.groups)
         new = self._view_of(assignment)
         log_f = self._kinds(view).log_prob("gather") + self._log_gather(view, members)
-        log_r = self._kinds(new).log_prob("dissolve") - math.log(len(self._dissolvable(new)))
+        log_r = self._kinds(new).log_prob("dissolve") - math.log(len(self._shared_objects(new)))
         return Proposal("gather", new, log_f, log_r)
 
     def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
