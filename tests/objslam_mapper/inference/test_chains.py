@@ -105,7 +105,7 @@ def test_pooled_by_counts_the_map_is_algorithm_1_over_the_samples_of_all_chains(
     assert _plain(mapped) == [*pooled.objects, *pooled.rejected]
     assert mapped.trajectory == pooled.trajectory
     kept = CHAINS.samples - CHAINS.burn_in
-    assert mapped.diagnostics["kept_samples"] == pooled.diagnostics["map_samples"] == CHAINS.chains * kept
+    assert mapped.diagnostics["kept_samples"] == mapped.diagnostics["map_samples"] == CHAINS.chains * kept
     assert mapped.diagnostics["pooling"] == "counts"
     # Each identity's pooled probability is the mean of its per-chain ones (equal kept draws per chain).
     for obj in (*mapped.objects, *mapped.rejected):

@@ -233,7 +233,10 @@ def test_an_object_on_a_table_behind_another_table_shows_above_it_unless_far_beh
 
 
 def _rectangle(bearing, width, bottom, top, range_m):
-    return Sight(*(np.array([[v]], dtype=float) for v in (bearing, width, bottom, top, range_m)), np.array([[True]]))
+    """A thing seen from one pose at the origin, standing ``range_m`` ahead, too thin to overlap another."""
+    footprint = np.array([[range_m], [0.0], [0.0]])
+    values = (np.array([[v]], dtype=float) for v in (bearing, width, bottom, top, range_m))
+    return Sight(*values, np.array([[True]]), footprint)
 
 
 @settings(max_examples=200, deadline=None)

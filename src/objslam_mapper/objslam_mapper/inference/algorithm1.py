@@ -296,7 +296,6 @@ def map_and_yields(
     info = dict(diagnostics or {})
     info.update(
         {
-            "map_samples": int(total) if float(total).is_integer() else round(float(total), 6),
             "identities": len(identities),
             "identity_overlap": float(identity_overlap),
             "spurious_location_stddev_m": float(spurious_location_stddev_m),

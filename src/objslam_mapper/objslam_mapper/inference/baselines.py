@@ -90,7 +90,7 @@ def map_of_groups(
         spurious_location_stddev_m=config.spurious_location_stddev_m,
         existence_threshold=config.existence_threshold,
         report_min_fraction=config.report_min_fraction,
-        diagnostics=diagnostics,
+        diagnostics={**(diagnostics or {}), "map_samples": 1},
     )
 
 

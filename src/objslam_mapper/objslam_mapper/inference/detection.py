@@ -126,7 +126,7 @@ class Sight:
     """How K things appear from N poses: (N, K) bearing, width, elevations of the lower and
     upper edge and range, and ``in_view`` (valid, wide enough, near enough, below the top of
     the view), before occlusion; ``footprint`` (3, K) is where each stands on the floor (x, y,
-    radius, in the map frame; None: nowhere in particular, it overlaps nothing)."""
+    radius, in the map frame)."""
 
     bearing: NDArray[np.float64]
     width: NDArray[np.float64]
@@ -134,25 +134,15 @@ class Sight:
     top: NDArray[np.float64]
     range_m: NDArray[np.float64]
     in_view: NDArray[np.bool_]
-    footprint: NDArray[np.float64] | None = None
-
-    def footprints(self) -> NDArray[np.float64]:
-        """(3, K) footprints; things without one are infinitely far from everything."""
-        if self.footprint is not None:
-            return self.footprint
-        k = self.bearing.shape[1]
-        return np.vstack([np.full((2, k), np.inf), np.zeros((1, k))])
+    footprint: NDArray[np.float64]
 
     def columns(self, index: ArrayLike) -> Sight:
         taken = np.asarray(index, dtype=np.int64)
-        return Sight(*(self._field(f)[:, taken] for f in Sight.__dataclass_fields__))
+        return Sight(*(getattr(self, f)[:, taken] for f in Sight.__dataclass_fields__))
 
     @staticmethod
     def join(parts: Sequence[Sight]) -> Sight:
-        return Sight(*(np.concatenate([p._field(f) for p in parts], axis=1) for f in Sight.__dataclass_fields__))
-
-    def _field(self, name: str) -> NDArray:
-        return self.footprints() if name == "footprint" else getattr(self, name)
+        return Sight(*(np.concatenate([getattr(p, f) for p in parts], axis=1) for f in Sight.__dataclass_fields__))
 
 
 def sight(
@@ -170,7 +160,7 @@ def sight(
     n, k = len(poses), len(things)
     if k == 0:
         empty = np.zeros((n, 0))
-        return Sight(empty, empty, empty, empty, empty, empty.astype(bool), footprint=np.zeros((3, 0)))
+        return Sight(empty, empty, empty, empty, empty, empty.astype(bool), np.zeros((3, 0)))
     pred = predict_reduced(
         np.repeat(poses, k, axis=0),
         np.tile(things[:, :3], (n, 1)),
@@ -241,10 +231,9 @@ def hidden(rows: Sight, occluders: Sight, config: DetectionConfig) -> NDArray[np
     occluders = occluders.columns(np.flatnonzero(np.isfinite(occluders.range_m).any(axis=0)))
     if not occluders.bearing.shape[1]:
         return out
-    mine, theirs = rows.footprints(), occluders.footprints()
-    with np.errstate(invalid="ignore"):  # inf - inf: a thing without a footprint
-        apart = np.hypot(mine[0][:, None] - theirs[0][None, :], mine[1][:, None] - theirs[1][None, :])
-    overlapping = apart < mine[2][:, None] + theirs[2][None, :]  # (R, O); NaN compares False
+    mine, theirs = rows.footprint, occluders.footprint
+    apart = np.hypot(mine[0][:, None] - theirs[0][None, :], mine[1][:, None] - theirs[1][None, :])
+    overlapping = apart < mine[2][:, None] + theirs[2][None, :]  # (R, O)
     # Only the (pose, thing) pairs in view matter: (P, O) against every occluder.
     pose, row = np.nonzero(rows.in_view)
     half_width = 0.5 * rows.width[pose, row]
@@ -348,7 +337,7 @@ def sightings(
     tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
     covered = hidden(seen, Sight.join([seen, tables]), config)
     kin = np.full(k, -1, dtype=np.int64) if kin is None else np.asarray(kin, dtype=np.int64)
-    hit = shared_hits(hit_matrix(problem, len(seen.in_view), groups), seen.footprints(), kin)
+    hit = shared_hits(hit_matrix(problem, len(seen.in_view), groups), seen.footprint, kin)
     return Sightings(seen, tables, covered, hit, kin)
 
 

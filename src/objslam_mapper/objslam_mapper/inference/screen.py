@@ -170,11 +170,11 @@ class ProposalScreen:
                 target.problem, poses, gained_estimates, target.on_table(gained, gained_members), target.detection
             )
             shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), target.detection)
-            footprints = fresh.footprints()
+            footprints = fresh.footprint
         recounted = [target.measurements(old_groups[k]) for k in recount]
         hit = shared_hits(
             hit_matrix(target.problem, len(poses), recounted + gained_members),
-            np.hstack([seen.sight.footprints()[:, recount], footprints]),
+            np.hstack([seen.sight.footprint[:, recount], footprints]),
             np.concatenate([old_kin[recount], gained_kin]),
         )
         should = np.hstack([seen.sight.in_view[:, recount] & ~seen.hidden[:, recount], shown])
