@@ -402,6 +402,14 @@ class DetectionConfig:
         "tall as their base, which hides what is behind it (0: no tables)",
         minimum=0.0,
     )
+    distractor_rate_prior: float = setting(
+        0.0,
+        "distractors are detected at a rate of their own, Beta-distributed about `probability` with this "
+        "prior count (a + b): flat things are seen from fewer places than cylinders (0: at `probability`, "
+        "as objects)",
+        minimum=0.0,
+        expert=True,
+    )
 
 
 @dataclass(frozen=True)

@@ -2,23 +2,27 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.stats import betabinom
 
 from objslam_common.catalog import load_catalog
 from objslam_common.mount import CameraMount
 from objslam_mapper.config import DetectionConfig, GraphConfig
 from objslam_mapper.graph.problem import build_problem
 from objslam_mapper.inference.detection import (
+    MissTerms,
     Sight,
     View,
     camera_view,
     detection_log_likelihood,
     hidden,
+    own_rate_log_likelihood,
     shared_hits,
     sight,
     sightings,
@@ -109,6 +113,47 @@ def test_fragments_of_one_distractor_share_their_hits_and_objects_do_not():
 
 
 EVERYWHERE_BUT_HIGH = View(1.5)
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    hits=st.integers(0, 400),
+    misses=st.integers(0, 600),
+    prior=st.floats(0.1, 50.0),
+    probability=st.floats(0.05, 0.95),
+)
+def test_a_thing_detected_at_a_rate_of_its_own_scores_the_beta_binomial_of_its_hits(hits, misses, prior, probability):
+    config = DetectionConfig(probability=probability, distractor_rate_prior=prior)
+    a, b = prior * probability, prior * (1.0 - probability)
+    # The probability of one sequence with these counts (scipy's pmf counts every order), less what
+    # the hits cost in every association.
+    expected = (
+        betabinom.logpmf(hits, hits + misses, a, b)
+        - (math.lgamma(hits + misses + 1) - math.lgamma(hits + 1) - math.lgamma(misses + 1))
+        - hits * math.log(probability)
+    )
+    assert own_rate_log_likelihood(hits, misses, config) == pytest.approx(expected, rel=1e-9, abs=1e-7)
+    # A rare detection is cheaper at a rate of its own than at P_d; a strong prior is P_d itself.
+    if misses >= 10 * (hits + 1) and probability >= 0.5:
+        assert own_rate_log_likelihood(hits, misses, config) > misses * math.log1p(-probability)
+    sure = dataclasses.replace(config, distractor_rate_prior=1e10)
+    assert own_rate_log_likelihood(hits, misses, sure) == pytest.approx(misses * math.log1p(-probability), abs=0.01)
+
+
+def test_only_things_of_their_own_rate_leave_the_miss_count_and_only_when_the_prior_is_set():
+    should = np.ones((10, 3), dtype=bool)
+    hit = np.zeros((10, 3), dtype=bool)
+    hit[:2, 0] = hit[:6, 1] = hit[:9, 2] = True  # 8, 4 and 1 misses
+    own = np.array([True, False, True])
+    assert MissTerms.of(should, hit, own, CONFIG) == MissTerms(13)
+    config = DetectionConfig(distractor_rate_prior=2.0)
+    terms = MissTerms.of(should, hit, own, config)
+    assert terms.misses == 4
+    assert terms.own_rate_log_likelihood == pytest.approx(
+        own_rate_log_likelihood(2, 8, config) + own_rate_log_likelihood(9, 1, config)
+    )
+    assert terms.log_likelihood(config) == pytest.approx(4 * math.log1p(-0.7) + terms.own_rate_log_likelihood)
+    assert (terms - terms).log_likelihood(config) == 0.0
 
 
 def test_too_narrow_too_far_or_above_the_view_is_not_in_view():

@@ -14,12 +14,12 @@ from objslam_mapper.graph.solver import solve
 from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
 from objslam_mapper.inference.chain import MetropolisHastings
 from objslam_mapper.inference.clutter import DISTRACTOR, INDEPENDENT, ClutterModel
-from objslam_mapper.inference.detection import sightings
+from objslam_mapper.inference.detection import own_rate_log_likelihood, sightings
 from objslam_mapper.inference.exact import ExactDistribution
 from objslam_mapper.inference.infer import infer_map
 from objslam_mapper.inference.screen import ProposalScreen
 from objslam_mapper.inference.start import clear_start_objects, initial_association, recall_start_clutter
-from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, AssociationTarget, TargetOptions
+from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, AssociationTarget, TargetOptions, estimates
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
 from objslam_mapper.model.slice_model import bounds_of_cuts
 from objslam_mapper.pipeline import build_map
@@ -412,3 +412,56 @@ def test_the_target_keeps_edges_cut_at_the_sides_and_bottom_as_bounds():
     expected[:, 3] = 0  # only the upper edge is taken as measured
     np.testing.assert_array_equal(target.problem.measurement_bounds[: problem.measurement_count], expected)
     np.testing.assert_array_equal(target.estimation_problem.measurement_bounds[: problem.measurement_count], bounds)
+
+
+def test_distractors_at_a_rate_of_their_own_in_the_target_and_the_screen():
+    """With ``distractor_rate_prior`` set, a distractor's detection term is the beta-binomial of
+    its own hits and misses, objects keep theirs at P_d, in the target and (over the groups a
+    move changes, at fixed poses) in the screen. A real object's tracklet sent to clutter, seen
+    about as often as P_d says, gains little by its own rate: no escape from its misses."""
+    run = simulate()
+    problem = problem_of(run, with_poster(run))
+    chained = tracklets_of_problem(problem)
+    detection = DetectionConfig(max_range_m=10.0, distractor_rate_prior=2.0)
+    options = TargetOptions(clutter=ClutterConfig(), exclusion=False, detection=detection)
+    target = AssociationTarget(problem, chained.tracklets, options)
+    state = initial_association(chained.tracklets, 0.6)
+    green = next(t for t, label in enumerate(chained.labels) if label == "green")
+    to_clutter = Association.of([CLUTTER if t == green else a for t, a in enumerate(state.assignment)])
+    assert target.component(green).kind == DISTRACTOR
+    log_miss = np.log1p(-detection.probability)
+
+    def counts(assoc, poses, things):
+        """Each graph group's hits and misses, from sightings made apart."""
+        groups = target.graph_groups(assoc)
+        members = [target.measurements(g) for g in groups]
+        seen = sightings(problem, poses, things, members, detection, target.view, kin=target.kin(groups, things))
+        should = seen.sight.in_view & ~seen.hidden
+        hits, misses = (should & seen.hit).sum(axis=0), (should & ~seen.hit).sum(axis=0)
+        return {g: (int(h), int(m)) for g, h, m in zip(groups, hits, misses, strict=True)}
+
+    def terms(assoc, poses, things):
+        """Each graph group's detection term (own rates by hand)."""
+        return {
+            g: own_rate_log_likelihood(h, m, detection) if g[0] == DISTRACTOR else m * log_miss
+            for g, (h, m) in counts(assoc, poses, things).items()
+        }
+
+    for assoc in (state, to_clutter):
+        solution = target.solution(assoc)
+        expected = sum(terms(assoc, solution.map_T_base, estimates(solution)).values())
+        assert target.detection_log_likelihood(assoc, solution) == pytest.approx(expected, abs=1e-9)
+    solution = target.solution(to_clutter)
+    hits, misses = counts(to_clutter, solution.map_T_base, estimates(solution))[(DISTRACTOR, (green,))]
+    assert misses > 0 and 0.6 < hits / (hits + misses) < 0.9
+    assert abs(own_rate_log_likelihood(hits, misses, detection) - misses * log_miss) < 5.0
+    # The screen: the change over the changed groups at the state's fixed poses and estimates.
+    screen = ProposalScreen(target)
+    poses, _, fixed_estimates = screen._reference(state)
+    old = target.graph_groups(state)
+    kept = dict(zip(old, fixed_estimates, strict=True))
+    new = target.graph_groups(to_clutter)
+    things = np.array([kept[g] if g in kept else screen._conditional(state, g)[1] for g in new])
+    before, after = terms(state, poses, fixed_estimates), terms(to_clutter, poses, things)
+    changed = sum(v for g, v in after.items() if g not in before) - sum(v for g, v in before.items() if g not in after)
+    assert screen._screen_detection(state, old, new) == pytest.approx(changed, abs=1e-9)

@@ -291,11 +291,22 @@ class Sightings:
     hidden: NDArray[np.bool_]
     hit: NDArray[np.bool_]
     kin: NDArray[np.int64]  # (K,) which share their hits (shared_hits; -1: none)
+    own_rate: NDArray[np.bool_]  # (K,) detected at a rate of their own (distractors: MissTerms)
+
+    @property
+    def should(self) -> NDArray[np.bool_]:
+        """(N, K) images where a thing should be seen: in view and not hidden."""
+        return self.sight.in_view & ~self.hidden
 
     @property
     def missed(self) -> NDArray[np.bool_]:
         """(N, K) images where a thing should be seen and has no slice."""
-        return self.sight.in_view & ~self.hidden & ~self.hit
+        return self.should & ~self.hit
+
+    def terms(self, config: DetectionConfig, columns: Sequence[int] | None = None) -> MissTerms:
+        """The :class:`MissTerms` of the things of ``columns`` (default: all)."""
+        index = slice(None) if columns is None else list(columns)
+        return MissTerms.of(self.should[:, index], self.hit[:, index], self.own_rate[index], config)
 
     def occluders(self, index: Sequence[int]) -> Sight:
         """The things of ``index`` and their tables, as occluders of others."""
@@ -328,22 +339,70 @@ def sightings(
     *,
     on_table: NDArray[np.bool_] | None = None,
     kin: NDArray[np.int64] | None = None,
+    own_rate: NDArray[np.bool_] | None = None,
 ) -> Sightings:
     """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices);
     ``on_table`` (K,) says which stand on a table (default: none), ``kin`` (K,) which share
-    their hits (:func:`shared_hits`; default: none)."""
+    their hits (:func:`shared_hits`; default: none), ``own_rate`` (K,) which are detected at
+    a rate of their own (:class:`MissTerms`; default: none)."""
     seen = sight(problem, map_T_base, things, config, view)
     k = seen.bearing.shape[1]
     tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
     covered = hidden(seen, Sight.join([seen, tables]), config)
     kin = np.full(k, -1, dtype=np.int64) if kin is None else np.asarray(kin, dtype=np.int64)
     hit = shared_hits(hit_matrix(problem, len(seen.in_view), groups), seen.footprint, kin)
-    return Sightings(seen, tables, covered, hit, kin)
+    own = np.zeros(k, dtype=bool) if own_rate is None else np.asarray(own_rate, dtype=bool)
+    return Sightings(seen, tables, covered, hit, kin, own)
 
 
 def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:
     """``n_miss log(1 - P_d)``."""
     return n_miss * math.log1p(-config.probability)
+
+
+class MissTerms(NamedTuple):
+    """The detection term of some things, in two parts that add and subtract exactly: the
+    misses of the things detected at ``P_d`` (a count), and the summed terms of those detected
+    at a rate of their own (module docstring)."""
+
+    misses: int
+    own_rate_log_likelihood: float = 0.0
+
+    @staticmethod
+    def of(
+        should: NDArray[np.bool_], hit: NDArray[np.bool_], own_rate: NDArray[np.bool_], config: DetectionConfig
+    ) -> MissTerms:
+        """The terms of K things: ``should`` (N, K) be seen, ``hit`` (N, K) have a slice,
+        ``own_rate`` (K,) detected at a rate of their own (ignored unless
+        ``config.distractor_rate_prior`` > 0)."""
+        missed = should & ~hit
+        own = np.asarray(own_rate, dtype=bool) & (config.distractor_rate_prior > 0.0)
+        if not own.any():
+            return MissTerms(int(np.count_nonzero(missed)))
+        hits = np.count_nonzero(should[:, own] & hit[:, own], axis=0)
+        misses = np.count_nonzero(missed[:, own], axis=0)
+        own_value = sum(own_rate_log_likelihood(int(h), int(m), config) for h, m in zip(hits, misses, strict=True))
+        return MissTerms(int(np.count_nonzero(missed[:, ~own])), own_value)
+
+    def __sub__(self, other: object) -> MissTerms:
+        assert isinstance(other, MissTerms)
+        return MissTerms(self.misses - other.misses, self.own_rate_log_likelihood - other.own_rate_log_likelihood)
+
+    def log_likelihood(self, config: DetectionConfig) -> float:
+        return miss_count_log_likelihood(self.misses, config) + self.own_rate_log_likelihood
+
+
+def own_rate_log_likelihood(hits: int, misses: int, config: DetectionConfig) -> float:
+    """The detection term of a thing detected at an unknown rate ``r ~ Beta(s P_d, s (1 - P_d))``,
+    ``s`` = ``distractor_rate_prior``: the beta-binomial marginal of its ``hits`` and ``misses``,
+    less ``hits log P_d`` (what a detection costs in every association; module docstring)."""
+    a = config.distractor_rate_prior * config.probability
+    b = config.distractor_rate_prior - a
+    return _log_beta(hits + a, misses + b) - _log_beta(a, b) - hits * math.log(config.probability)
+
+
+def _log_beta(a: float, b: float) -> float:
+    return math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b)
 
 
 def detection_log_likelihood(

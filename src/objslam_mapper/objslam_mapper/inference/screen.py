@@ -37,16 +37,16 @@ from objslam_mapper.graph.conditional_evidence import object_evidence
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.detection import (
+    MissTerms,
     Sight,
     hit_matrix,
-    miss_count_log_likelihood,
     shared_hits,
     sight,
     table_sight,
     visible,
 )
 from objslam_mapper.inference.exclusion import near_pairs, no_overlap_log_probability
-from objslam_mapper.inference.target import OBJECT, AssociationTarget, GraphGroup, estimates
+from objslam_mapper.inference.target import DISTRACTOR, OBJECT, AssociationTarget, GraphGroup, estimates
 
 REFERENCE_CACHE_SIZE = 1024
 OBJECT_EVIDENCE_CACHE_SIZE = 100_000
@@ -163,7 +163,7 @@ class ProposalScreen:
         old_kin = seen.kin  # the kin of the state's groups, as its sightings were made with
         touches_kin = bool((old_kin[lost] >= 0).any() or (gained_kin >= 0).any())
         recount = [k for k in kept if old_kin[k] >= 0] if touches_kin else []
-        n_miss = -int(np.count_nonzero(seen.missed[:, lost + recount]))
+        before = seen.terms(target.detection, lost + recount)
         if gained:
             fresh = sight(target.problem, poses, gained_estimates, target.detection, target.view)
             fresh_tables = table_sight(
@@ -177,9 +177,10 @@ class ProposalScreen:
             np.hstack([seen.sight.footprint[:, recount], footprints]),
             np.concatenate([old_kin[recount], gained_kin]),
         )
-        should = np.hstack([seen.sight.in_view[:, recount] & ~seen.hidden[:, recount], shown])
-        n_miss += int(np.count_nonzero(should & ~hit))
-        return miss_count_log_likelihood(n_miss, target.detection)
+        should = np.hstack([seen.should[:, recount], shown])
+        own_rate = np.concatenate([seen.own_rate[recount], [g[0] == DISTRACTOR for g in gained]]).astype(bool)
+        after = MissTerms.of(should, hit, own_rate, target.detection)
+        return (after - before).log_likelihood(target.detection)
 
     def __call__(self, state: Association, new: Association) -> float:
         """Approximate ``log P(new|Z) - log P(state|Z)``: poses fixed at ``state``'s MAP.

@@ -47,7 +47,7 @@ from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component
-from objslam_mapper.inference.detection import Sightings, camera_view, miss_count_log_likelihood, sightings
+from objslam_mapper.inference.detection import Sightings, camera_view, sightings
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.exclusion import no_overlap_log_probability
 from objslam_mapper.inference.tracklets import Tracklet
@@ -253,7 +253,7 @@ class AssociationTarget:
     def detection_log_likelihood(self, state: Association, solution: GraphSolution) -> float:
         """The detection term of ``state``'s objects and distractors at its MAP (objslam_mapper.inference.detection)."""
         seen = self.sightings(state, solution.map_T_base, estimates(solution))
-        return miss_count_log_likelihood(int(np.count_nonzero(seen.missed)), self.detection)
+        return seen.terms(self.detection).log_likelihood(self.detection)
 
     def no_overlap_log_probability(self, state: Association, solution: GraphSolution) -> float:
         """log P(no two objects of ``state`` overlap) at its MAP (objslam_mapper.inference.exclusion)."""
@@ -291,6 +291,7 @@ class AssociationTarget:
             self.view,
             on_table=on_table,
             kin=self.kin(groups, estimates),
+            own_rate=np.array([g[0] == DISTRACTOR for g in groups], dtype=bool),
         )
         self._sights[state] = (map_T_base, seen)
         if len(self._sights) > SIGHTINGS_CACHE_SIZE:
