@@ -414,54 +414,66 @@ def test_the_target_keeps_edges_cut_at_the_sides_and_bottom_as_bounds():
     np.testing.assert_array_equal(target.estimation_problem.measurement_bounds[: problem.measurement_count], bounds)
 
 
-def test_distractors_at_a_rate_of_their_own_in_the_target_and_the_screen():
-    """With ``distractor_rate_prior`` set, a distractor's detection term is the beta-binomial of
-    its own hits and misses, objects keep theirs at P_d, in the target and (over the groups a
-    move changes, at fixed poses) in the screen. A real object's tracklet sent to clutter, seen
-    about as often as P_d says, gains little by its own rate: no escape from its misses."""
+def test_distractors_unlike_their_class_at_a_rate_of_their_own_in_the_target_and_the_screen():
+    """With ``distractor_rate_prior`` set, a distractor unlike any object of its class (the
+    poster, a metre above the floor class) is scored by the beta-binomial of its own hits and
+    misses; objects, and a real object's tracklet as a distractor (shaped like its class: no
+    escape from its misses), keep theirs at P_d. In the target, and in the screen over the
+    groups a move changes at fixed poses."""
     run = simulate()
     problem = problem_of(run, with_poster(run))
     chained = tracklets_of_problem(problem)
     detection = DetectionConfig(max_range_m=10.0, distractor_rate_prior=2.0)
     options = TargetOptions(clutter=ClutterConfig(), exclusion=False, detection=detection)
     target = AssociationTarget(problem, chained.tracklets, options)
-    state = initial_association(chained.tracklets, 0.6)
-    green = next(t for t, label in enumerate(chained.labels) if label == "green")
-    to_clutter = Association.of([CLUTTER if t == green else a for t, a in enumerate(state.assignment)])
-    assert target.component(green).kind == DISTRACTOR
+
+    def owner(tracklet):
+        m = tracklet.measurement_indices[0]
+        image, slot = problem.measurement_image[m], problem.measurement_slot[m]
+        return run.slice_object[image][slot] if slot < len(run.slice_object[image]) else CLUTTER
+
+    truth = Association.of([owner(tr) for tr in chained.tracklets])
+    (poster,) = truth.clutter
+    green = next(t for t, label in enumerate(chained.labels) if label == "green" and t != poster)
+    to_clutter = Association.of([CLUTTER if t == green else a for t, a in enumerate(truth.assignment)])
     log_miss = np.log1p(-detection.probability)
 
     def counts(assoc, poses, things):
-        """Each graph group's hits and misses, from sightings made apart."""
+        """Each graph group's hits, misses and kin, from sightings made apart."""
         groups = target.graph_groups(assoc)
         members = [target.measurements(g) for g in groups]
-        seen = sightings(problem, poses, things, members, detection, target.view, kin=target.kin(groups, things))
+        kin = target.kin(groups, things)
+        seen = sightings(problem, poses, things, members, detection, target.view, kin=kin)
         should = seen.sight.in_view & ~seen.hidden
         hits, misses = (should & seen.hit).sum(axis=0), (should & ~seen.hit).sum(axis=0)
-        return {g: (int(h), int(m)) for g, h, m in zip(groups, hits, misses, strict=True)}
+        return {g: (int(h), int(m), int(k)) for g, h, m, k in zip(groups, hits, misses, kin, strict=True)}
 
     def terms(assoc, poses, things):
         """Each graph group's detection term (own rates by hand)."""
         return {
-            g: own_rate_log_likelihood(h, m, detection) if g[0] == DISTRACTOR else m * log_miss
-            for g, (h, m) in counts(assoc, poses, things).items()
+            g: own_rate_log_likelihood(h, m, detection) if k >= 0 else m * log_miss
+            for g, (h, m, k) in counts(assoc, poses, things).items()
         }
 
-    for assoc in (state, to_clutter):
+    for assoc in (truth, to_clutter):
         solution = target.solution(assoc)
         expected = sum(terms(assoc, solution.map_T_base, estimates(solution)).values())
         assert target.detection_log_likelihood(assoc, solution) == pytest.approx(expected, abs=1e-9)
     solution = target.solution(to_clutter)
-    hits, misses = counts(to_clutter, solution.map_T_base, estimates(solution))[(DISTRACTOR, (green,))]
-    assert misses > 0 and 0.6 < hits / (hits + misses) < 0.9
-    assert abs(own_rate_log_likelihood(hits, misses, detection) - misses * log_miss) < 5.0
+    seen = counts(to_clutter, solution.map_T_base, estimates(solution))
+    hits, misses, kin = seen[(DISTRACTOR, (poster,))]
+    assert kin >= 0 and own_rate_log_likelihood(hits, misses, detection) > misses * log_miss + 1.0
+    assert seen[(DISTRACTOR, (green,))][2] == -1
     # The screen: the change over the changed groups at the state's fixed poses and estimates.
     screen = ProposalScreen(target)
-    poses, _, fixed_estimates = screen._reference(state)
-    old = target.graph_groups(state)
+    poses, _, fixed_estimates = screen._reference(truth)
+    old = target.graph_groups(truth)
     kept = dict(zip(old, fixed_estimates, strict=True))
-    new = target.graph_groups(to_clutter)
-    things = np.array([kept[g] if g in kept else screen._conditional(state, g)[1] for g in new])
-    before, after = terms(state, poses, fixed_estimates), terms(to_clutter, poses, things)
-    changed = sum(v for g, v in after.items() if g not in before) - sum(v for g, v in before.items() if g not in after)
-    assert screen._screen_detection(state, old, new) == pytest.approx(changed, abs=1e-9)
+    for new_state in (to_clutter, Association.of([0 if t == poster else a for t, a in enumerate(truth.assignment)])):
+        new = target.graph_groups(new_state)
+        things = np.array([kept[g] if g in kept else screen._conditional(truth, g)[1] for g in new])
+        before, after = terms(truth, poses, fixed_estimates), terms(new_state, poses, things)
+        changed = sum(v for g, v in after.items() if g not in before) - sum(
+            v for g, v in before.items() if g not in after
+        )
+        assert screen._screen_detection(truth, old, new) == pytest.approx(changed, abs=1e-9)

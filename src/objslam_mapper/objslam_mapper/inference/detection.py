@@ -290,8 +290,7 @@ class Sightings:
     tables: Sight
     hidden: NDArray[np.bool_]
     hit: NDArray[np.bool_]
-    kin: NDArray[np.int64]  # (K,) which share their hits (shared_hits; -1: none)
-    own_rate: NDArray[np.bool_]  # (K,) detected at a rate of their own (distractors: MissTerms)
+    kin: NDArray[np.int64]  # (K,) which share their hits and are detected at a rate of their own (-1: none)
 
     @property
     def should(self) -> NDArray[np.bool_]:
@@ -306,7 +305,7 @@ class Sightings:
     def terms(self, config: DetectionConfig, columns: Sequence[int] | None = None) -> MissTerms:
         """The :class:`MissTerms` of the things of ``columns`` (default: all)."""
         index = slice(None) if columns is None else list(columns)
-        return MissTerms.of(self.should[:, index], self.hit[:, index], self.own_rate[index], config)
+        return MissTerms.of(self.should[:, index], self.hit[:, index], self.kin[index] >= 0, config)
 
     def occluders(self, index: Sequence[int]) -> Sight:
         """The things of ``index`` and their tables, as occluders of others."""
@@ -339,20 +338,18 @@ def sightings(
     *,
     on_table: NDArray[np.bool_] | None = None,
     kin: NDArray[np.int64] | None = None,
-    own_rate: NDArray[np.bool_] | None = None,
 ) -> Sightings:
     """The :class:`Sightings` of (K, 5) ``things`` and their ``groups`` (measurement indices);
     ``on_table`` (K,) says which stand on a table (default: none), ``kin`` (K,) which share
-    their hits (:func:`shared_hits`; default: none), ``own_rate`` (K,) which are detected at
-    a rate of their own (:class:`MissTerms`; default: none)."""
+    their hits (:func:`shared_hits`) and are detected at a rate of their own (:class:`MissTerms`;
+    default: none)."""
     seen = sight(problem, map_T_base, things, config, view)
     k = seen.bearing.shape[1]
     tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
     covered = hidden(seen, Sight.join([seen, tables]), config)
     kin = np.full(k, -1, dtype=np.int64) if kin is None else np.asarray(kin, dtype=np.int64)
     hit = shared_hits(hit_matrix(problem, len(seen.in_view), groups), seen.footprint, kin)
-    own = np.zeros(k, dtype=bool) if own_rate is None else np.asarray(own_rate, dtype=bool)
-    return Sightings(seen, tables, covered, hit, kin, own)
+    return Sightings(seen, tables, covered, hit, kin)
 
 
 def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:

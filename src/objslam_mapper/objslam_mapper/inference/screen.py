@@ -46,7 +46,7 @@ from objslam_mapper.inference.detection import (
     visible,
 )
 from objslam_mapper.inference.exclusion import near_pairs, no_overlap_log_probability
-from objslam_mapper.inference.target import DISTRACTOR, OBJECT, AssociationTarget, GraphGroup, estimates
+from objslam_mapper.inference.target import OBJECT, AssociationTarget, GraphGroup, estimates
 
 REFERENCE_CACHE_SIZE = 1024
 OBJECT_EVIDENCE_CACHE_SIZE = 100_000
@@ -172,14 +172,14 @@ class ProposalScreen:
             shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), target.detection)
             footprints = fresh.footprint
         recounted = [target.measurements(old_groups[k]) for k in recount]
+        kin = np.concatenate([old_kin[recount], gained_kin])
         hit = shared_hits(
             hit_matrix(target.problem, len(poses), recounted + gained_members),
             np.hstack([seen.sight.footprint[:, recount], footprints]),
-            np.concatenate([old_kin[recount], gained_kin]),
+            kin,
         )
         should = np.hstack([seen.should[:, recount], shown])
-        own_rate = np.concatenate([seen.own_rate[recount], [g[0] == DISTRACTOR for g in gained]]).astype(bool)
-        after = MissTerms.of(should, hit, own_rate, target.detection)
+        after = MissTerms.of(should, hit, kin >= 0, target.detection)
         return (after - before).log_likelihood(target.detection)
 
     def __call__(self, state: Association, new: Association) -> float:

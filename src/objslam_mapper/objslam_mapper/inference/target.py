@@ -291,7 +291,6 @@ class AssociationTarget:
             self.view,
             on_table=on_table,
             kin=self.kin(groups, estimates),
-            own_rate=np.array([g[0] == DISTRACTOR for g in groups], dtype=bool),
         )
         self._sights[state] = (map_T_base, seen)
         if len(self._sights) > SIGHTINGS_CACHE_SIZE:
