@@ -404,9 +404,9 @@ class DetectionConfig:
     )
     distractor_rate_prior: float = setting(
         0.0,
-        "distractors are detected at a rate of their own, Beta-distributed about `probability` with this "
-        "prior count (a + b): flat things are seen from fewer places than cylinders (0: at `probability`, "
-        "as objects)",
+        "distractors unlike any object of their class are detected at a rate of their own, Beta-distributed "
+        "about `probability` with this prior count (a + b): posters and patches are seen from fewer places "
+        "than cylinders (0: at `probability`, as objects; docs/method.md)",
         minimum=0.0,
         expert=True,
     )
