@@ -150,6 +150,20 @@ class Sight:
         return Sight(*(getattr(self, f)[:, taken] for f in Sight.__dataclass_fields__))
 
     @staticmethod
+    def none_of(n_poses: int) -> Sight:
+        """No things seen from ``n_poses`` poses."""
+        empty = np.zeros((n_poses, 0))
+        return Sight(
+            bearing=empty,
+            width=empty,
+            bottom=empty,
+            top=empty,
+            range_m=empty,
+            in_view=empty.astype(bool),
+            footprint=np.zeros((3, 0)),
+        )
+
+    @staticmethod
     def join(parts: Sequence[Sight]) -> Sight:
         return Sight(*(np.concatenate([getattr(p, f) for p in parts], axis=1) for f in Sight.__dataclass_fields__))
 
@@ -168,8 +182,7 @@ def sight(
     poses = np.asarray(map_T_base, dtype=float)
     n, k = len(poses), len(things)
     if k == 0:
-        empty = np.zeros((n, 0))
-        return Sight(empty, empty, empty, empty, empty, empty.astype(bool), np.zeros((3, 0)))
+        return Sight.none_of(n)
     pred = predict_reduced(
         np.repeat(poses, k, axis=0),
         np.tile(things[:, :3], (n, 1)),
