@@ -107,8 +107,9 @@ def test_each_tracklet_takes_the_likelier_clutter_component(scene):
     config = ClutterConfig(distractor_weight=0.25)
     model = ClutterModel(problem, config)
     independent = len(members) * config.log_likelihood_per_slice
-    distractor = model.distractor_log_evidence(members)
+    distractor, unlike = model.distractor_fit(members)
     component = model.component(members)
+    assert not unlike and not component.unlike_class  # a real object's tracklet: shaped like its class
     assert component.kind == DISTRACTOR
     assert component.alone_log_likelihood == pytest.approx(np.log(0.25) + distractor)
     assert component.alone_log_likelihood > np.log(0.75) + independent
@@ -128,13 +129,49 @@ def test_each_tracklet_takes_the_likelier_clutter_component(scene):
     assert solve(problem, [members]).log_evidence > distractor > independent
 
 
+def test_which_distractors_share_hits_is_fixed_per_tracklet_not_by_the_state():
+    """The poster's tracklet shares its hits in every state where it is clutter, a real object's
+    never, however the rest of the map moves (a stretched map must not make things unlike)."""
+    run = simulate()
+    problem = problem_of(run, with_poster(run))
+    chained = tracklets_of_problem(problem)
+    options = TargetOptions(clutter=ClutterConfig(), exclusion=False)
+    target = AssociationTarget(problem, chained.tracklets, options)
+    model = target.clutter
+    flags = [model.component(list(t.measurement_indices)).unlike_class for t in chained.tracklets]
+    assert any(flags) and not all(flags)
+    n = len(chained.tracklets)
+    states = [Association.of([CLUTTER] * n), Association.of(list(range(n)))]
+    states += [Association.of([CLUTTER if t == k else t for t in range(n)]) for k in range(n)]
+    # One object of two tracklets of a class, the rest clutter: where the pair is two objects'
+    # tracklets, the map bends, and at its estimates other red tracklets looked unlike their class.
+    labels = chained.labels
+    states += [
+        Association.of([0 if t in (a, b) else CLUTTER for t in range(n)])
+        for a in range(n)
+        for b in range(a + 1, n)
+        if labels[a] == labels[b]
+    ]
+    for state in states:
+        groups = target.graph_groups(state)
+        expected = [
+            model.distractor_row(int(chained.tracklets[g[1][0]].measurement_indices[0]))
+            if g[0] == DISTRACTOR and flags[g[1][0]]
+            else -1
+            for g in groups
+        ]
+        assert list(target.kin(groups)) == expected
+
+
 def test_a_distractor_explains_a_floating_poster_far_better_than_its_class():
     run = simulate()
     problem = problem_of(run, with_poster(run))
     poster = [m for m in range(problem.measurement_count) if problem.measurement_image[m] in POSTER_FRAMES]
     poster = [m for m in poster if problem.measurement_slot[m] == len(run.images[problem.measurement_image[m]].slices)]
     assert len(poster) == len(POSTER_FRAMES)
-    distractor = ClutterModel(problem, ClutterConfig()).distractor_log_evidence(poster)
+    model = ClutterModel(problem, ClutterConfig())
+    distractor, unlike = model.distractor_fit(poster)
+    assert unlike and model.component(poster).unlike_class
     # Its class explains the poster's slices only as outliers (objslam_mapper.model.outliers).
     assert distractor > solve(problem, [poster]).log_evidence + 40.0
 
@@ -442,7 +479,7 @@ def test_distractors_unlike_their_class_at_a_rate_of_their_own_in_the_target_and
         """Each graph group's hits, misses and kin, from sightings made apart."""
         groups = target.graph_groups(assoc)
         members = [target.measurements(g) for g in groups]
-        kin = target.kin(groups, things)
+        kin = target.kin(groups)
         seen = sightings(problem, poses, things, members, detection, target.view, kin=kin)
         should = seen.sight.in_view & ~seen.hidden
         hits, misses = (should & seen.hit).sum(axis=0), (should & ~seen.hit).sum(axis=0)

@@ -66,6 +66,10 @@ from objslam_mapper.graph.problem import GraphProblem, with_extra_priors
 INDEPENDENT = "independent"
 DISTRACTOR = "distractor"
 
+# A distractor whose shape is this many class-prior standard deviations off its class's is
+# no object of the class seen in fragments (it shares its hits with the others of its kind).
+UNLIKE_CLASS_SIGMAS = 3.0
+
 
 def distractor_priors(problem: GraphProblem, config: ClutterConfig) -> tuple[NDArray, NDArray]:
     """Prior rows (L, 5) of a distractor of each class: the class's, with z_base and size widened."""
@@ -86,6 +90,8 @@ class Component:
     # independent false alarms, log w for a distractor (whose slices are in the graph).
     log_weight: float
     alone_log_likelihood: float  # log L with the odometry alone (the component choice)
+    # A distractor unlike any object of its class with the odometry alone (it shares its hits).
+    unlike_class: bool = False
 
 
 class ClutterModel:
@@ -108,13 +114,20 @@ class ClutterModel:
             raise ValueError("the clutter model has no distractors (distractor_weight is 0)")
         return self._first_row + int(self.problem.measurement_label[measurement])
 
-    def distractor_log_evidence(self, measurement_indices: ArrayLike) -> float:
-        """Laplace evidence of the slices as one distractor, with the odometry alone."""
+    def distractor_fit(self, measurement_indices: ArrayLike) -> tuple[float, bool]:
+        """Laplace evidence of the slices as one distractor with the odometry alone, and whether
+        that distractor is unlike any object of its class (base height, diameter or height more
+        than UNLIKE_CLASS_SIGMAS of the class prior from the class's)."""
         if self._first_row is None:
-            return -math.inf
+            return -math.inf, False
         members = np.asarray(measurement_indices, dtype=np.int64)
         row = self.distractor_row(int(members[0]))
-        return solve_with_backend(self.problem, [members], priors=[row]).log_evidence
+        solution = solve_with_backend(self.problem, [members], priors=[row])
+        thing = solution.objects[0]
+        shape = np.array([thing.location_m[2], *thing.size_m])
+        label = int(self.problem.measurement_label[members[0]])
+        sigmas = np.abs(shape - self.problem.prior_mean[label, 2:]) / self.problem.prior_stddev[label, 2:]
+        return solution.log_evidence, bool(sigmas.max() > UNLIKE_CLASS_SIGMAS)
 
     def component(self, measurement_indices: ArrayLike) -> Component:
         """The component that explains a tracklet (the likelier one with the odometry alone)."""
@@ -122,7 +135,7 @@ class ClutterModel:
         independent = self.config.log_likelihood(np.size(measurement_indices))
         if w == 0.0:
             return Component(INDEPENDENT, independent, independent)
-        distractor = self.distractor_log_evidence(measurement_indices)
+        distractor, unlike = self.distractor_fit(measurement_indices)
         if w == 1.0 or math.log(w) + distractor > math.log1p(-w) + independent:
-            return Component(DISTRACTOR, math.log(w), math.log(w) + distractor)
+            return Component(DISTRACTOR, math.log(w), math.log(w) + distractor, unlike)
         return Component(INDEPENDENT, math.log1p(-w) + independent, math.log1p(-w) + independent)

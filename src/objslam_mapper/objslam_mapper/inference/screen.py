@@ -159,7 +159,7 @@ class ProposalScreen:
         footprints = np.zeros((3, 0))
         gained_members = [target.measurements(g) for g in gained]
         gained_estimates = np.array([self._conditional(state, g)[1] for g in gained]).reshape(-1, 5)
-        gained_kin = target.kin(gained, gained_estimates)
+        gained_kin = target.kin(gained)
         old_kin = seen.kin  # the kin of the state's groups, as its sightings were made with
         touches_kin = bool((old_kin[lost] >= 0).any() or (gained_kin >= 0).any())
         recount = [k for k in kept if old_kin[k] >= 0] if touches_kin else []
