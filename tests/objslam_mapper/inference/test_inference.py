@@ -107,12 +107,19 @@ def test_each_tracklet_takes_the_likelier_clutter_component(scene):
     config = ClutterConfig(distractor_weight=0.25)
     model = ClutterModel(problem, config)
     independent = len(members) * config.log_likelihood_per_slice
-    distractor, unlike = model.distractor_fit(members)
+    fit = model.distractor_fit(members)
+    distractor = fit.solution.log_evidence
     component = model.component(members)
-    assert not unlike and not component.unlike_class  # a real object's tracklet: shaped like its class
+    assert not fit.unlike_class and not component.unlike_class  # a real object's tracklet: shaped like its class
     assert component.kind == DISTRACTOR
     assert component.alone_log_likelihood == pytest.approx(np.log(0.25) + distractor)
     assert component.alone_log_likelihood > np.log(0.75) + independent
+    # Its misses as a static thing alone count in the choice: priced above what its slices are
+    # worth over false alarms, they make it independent false alarms.
+    margin = np.log(0.25) + distractor - (np.log(0.75) + independent)
+    priced = model.component(members, lambda f: -(margin - 1.0))
+    assert priced.kind == DISTRACTOR and priced.alone_log_likelihood == pytest.approx(np.log(0.75) + independent + 1.0)
+    assert model.component(members, lambda f: -(margin + 1.0)).kind == INDEPENDENT
     off = ClutterModel(problem, dataclasses.replace(config, distractor_weight=0.0)).component(members)
     assert off.kind == INDEPENDENT and off.log_weight == pytest.approx(independent)
     # Slices of nothing consistent (drawn uniformly from the measurement space): independent false alarms.
@@ -127,6 +134,47 @@ def test_each_tracklet_takes_the_likelier_clutter_component(scene):
     assert scattered.log_weight == pytest.approx(np.log(0.75) + independent)
     # A real object's tracklet is better explained by its class than by a shapeless distractor.
     assert solve(problem, [members]).log_evidence > distractor > independent
+
+
+def test_a_static_thing_seen_in_two_of_the_images_facing_it_is_false_alarms(scene):
+    """The choice of clutter component prices a distractor's misses: two slices of a real
+    object (its tracklet's first and last) fit a static thing, but alone they would miss in
+    every image between, so they are independent false alarms. With the rest of that
+    tracklet among the tracklets (fragments of one thing), the images the rest has a slice
+    in over the pair's predicted bearing are no misses, and the pair stays a distractor."""
+    _run, problem, chained = scene
+    whole, others = chained.tracklets[0], list(chained.tracklets[1:])
+    n = len(whole)
+
+    def part(ks: list[int]) -> Tracklet:
+        return Tracklet(
+            whole.label,
+            tuple(whole.measurement_indices[k] for k in ks),
+            tuple(whole.frame_indices[k] for k in ks),
+            whole.position_xy_m,
+        )
+
+    pair, rest = part([0, n - 1]), part(list(range(1, n - 1)))
+    detection = DetectionConfig(max_range_m=3.5)
+    off = dataclasses.replace(detection, enabled=False)
+    lonely = AssociationTarget(problem, [pair, *others], TargetOptions(detection=detection))
+    assert AssociationTarget(problem, [pair, *others], TargetOptions(detection=off)).component(0).kind == DISTRACTOR
+    assert lonely.component(0).kind == INDEPENDENT
+    fit = lonely.clutter.distractor_fit(list(pair.measurement_indices))
+    seen = sightings(
+        lonely.problem,
+        fit.solution.map_T_base,
+        estimates(fit.solution),
+        [np.array(pair.measurement_indices)],
+        detection,
+        lonely.view,
+    )
+    assert np.count_nonzero(seen.missed) >= n - 2  # what it would pay alone as a distractor
+    # In clutter it is then outside the graph and pays no misses.
+    in_clutter = Association.of([CLUTTER, *range(len(others))])
+    assert all(g[0] == "object" for g in lonely.graph_groups(in_clutter))
+    beside = AssociationTarget(problem, [pair, rest, *others], TargetOptions(detection=detection))
+    assert beside.component(0).kind == DISTRACTOR and beside.component(1).kind == DISTRACTOR
 
 
 def test_which_distractors_share_hits_is_fixed_per_tracklet_not_by_the_state():
@@ -170,8 +218,9 @@ def test_a_distractor_explains_a_floating_poster_far_better_than_its_class():
     poster = [m for m in poster if problem.measurement_slot[m] == len(run.images[problem.measurement_image[m]].slices)]
     assert len(poster) == len(POSTER_FRAMES)
     model = ClutterModel(problem, ClutterConfig())
-    distractor, unlike = model.distractor_fit(poster)
-    assert unlike and model.component(poster).unlike_class
+    fit = model.distractor_fit(poster)
+    distractor = fit.solution.log_evidence
+    assert fit.unlike_class and model.component(poster).unlike_class
     # Its class explains the poster's slices only as outliers (objslam_mapper.model.outliers).
     assert distractor > solve(problem, [poster]).log_evidence + 40.0
 

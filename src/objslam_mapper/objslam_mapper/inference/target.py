@@ -40,18 +40,19 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import ClutterConfig, DetectionConfig, SamplerConfig
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
 from objslam_mapper.inference.association import Association
-from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component
-from objslam_mapper.inference.detection import Sightings, camera_view, sightings
+from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component, DistractorFit
+from objslam_mapper.inference.detection import MissTerms, Sightings, camera_view, sightings
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.exclusion import no_overlap_log_probability
 from objslam_mapper.inference.tracklets import Tracklet
-from objslam_mapper.model.slice_model import ELEVATION_TOP, MEASURED
+from objslam_mapper.model.slice_model import BEARING, ELEVATION_TOP, MEASURED, WIDTH
 
 # The graph of an association without objects is the odometry chain alone: its MAP is the
 # odometry (chi2 = 0), and as the map from poses to (first-pose residual, increments) has a
@@ -138,7 +139,7 @@ class AssociationTarget:
         """How tracklet t is explained when it is clutter (one distractor solve, remembered)."""
         if t not in self._components:
             start = time.perf_counter()
-            self._components[t] = self.clutter.component(self._members[t])
+            self._components[t] = self.clutter.component(self._members[t], lambda fit: self._distractor_misses(t, fit))
             self.work.clutter_solves += 1
             self.work.clutter_seconds += time.perf_counter() - start
         return self._components[t]
@@ -196,8 +197,40 @@ class AssociationTarget:
         rows = [self.prior_row(g, m) for g, m in zip(groups, members, strict=True)]
         return members, rows
 
+    def _alone_detection(self, members: NDArray[np.int64], solution: GraphSolution, on_table: bool, kin: int) -> float:
+        """The detection term of one thing (``members`` solved alone as ``solution``): its
+        misses with nothing in front of it but its own table, if it stands on one. An image
+        where a tracklet of its class has a slice over its predicted bearing interval is no
+        miss: its other fragments' slices (clutter module docstring)."""
+        if not self.detection.enabled:
+            return 0.0
+        seen = sightings(
+            self.problem,
+            solution.map_T_base,
+            estimates(solution),
+            [members],
+            self.detection,
+            self.view,
+            on_table=np.array([on_table]),
+            kin=np.array([kin]),
+        )
+        label = self.problem.measurement_label[members[0]]
+        kind = np.concatenate([m for m in self._members if self.problem.measurement_label[m[0]] == label])
+        pose = self.problem.measurement_pose[kind]
+        measured = np.asarray(self.problem.measurements)[kind]
+        off = np.abs(wrap_angle(measured[:, BEARING] - seen.sight.bearing[pose, 0]))
+        over = off < 0.5 * (measured[:, WIDTH] + seen.sight.width[pose, 0])
+        hit = seen.hit.copy()
+        hit[pose[over], 0] = True
+        return MissTerms.of(seen.should, hit, seen.kin >= 0, self.detection).log_likelihood(self.detection)
+
+    def _distractor_misses(self, t: int, fit: DistractorFit) -> float:
+        """What tracklet t's distractor pays alone (clutter module docstring)."""
+        kin = fit.prior_row if fit.unlike_class else -1
+        return self._alone_detection(self._members[t], fit.solution, False, kin)
+
     def tracklet_clutter_log_likelihood(self, t: int) -> float:
-        """log L_clutter of tracklet t with the odometry alone (its component's)."""
+        """log L_clutter of tracklet t with the odometry alone (its component's, misses included)."""
         return self.component(t).alone_log_likelihood
 
     def prefers_clutter(self, t: int) -> bool:
@@ -206,9 +239,13 @@ class AssociationTarget:
         That is ``log P(J|Z)`` of the state with t its own object and every other tracklet
         clutter against the state with all of them clutter, both with the odometry alone
         (the other tracklets' terms cancel), so neither gets the trajectory the rest of the
-        map would give.
+        map would give; each pays the misses it would alone.
         """
-        alone = solve_with_backend(self.problem, [self._members[t]]).log_evidence
+        members = self._members[t]
+        solution = solve_with_backend(self.problem, [members])
+        row = int(self.problem.measurement_label[members[0]])
+        on_table = bool(self.problem.prior_mean[row, 2] > 0.0)
+        alone = solution.log_evidence + self._alone_detection(members, solution, on_table, -1)
         return bool(self.tracklet_clutter_log_likelihood(t) > alone)
 
     def clutter_log_likelihood(self, state: Association) -> float:
