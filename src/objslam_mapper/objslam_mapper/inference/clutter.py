@@ -45,24 +45,24 @@ the odometry alone. The choice is a fixed function of the tracklet, so the targe
 fixed function of the association; the max of a two-term mixture is within ``log 2`` of
 it. A distractor's ``log L`` there includes the missed detections it pays in the target
 (:mod:`objslam_mapper.inference.detection`), the images where that static thing, alone,
-should have been seen and was not: a static thing seen in 2 of the 100 images that face
-it is no static thing. Left out, a 2-slice tracklet chose "distractor" (its slices fit one
-by 40 nats) and then paid 100 to 300 nats of misses in every state that had it in
-clutter, so the chain put it anywhere else: its own object (a ghost), or the outlier
-slices of a real object of its class metres away, whose capped cost is a few nats; on a
-``twins`` bag three of four chains sat 126 nats below the fourth on such a choice and never
-met it. A thing is often seen in several tracklets (a patch passed twice, a poster cut by a
-nearer object), so an image with a slice of its class over the thing's predicted bearing
-interval is no miss, whichever tracklet the slice is in: without that, the fragments of patches each paid
-the images the others saw, became independent false alarms at ~20 nats per slice, and
-gathered they were cheaper as objects (on ``clutter`` seed 1, five patches mapped where
-three were). Alone, with nothing in front of it, a thing's misses are still overcounted
-where other things hide it; that errs towards independent false alarms, which pay no
-misses, only for tracklets short enough that a few hundred nats of misses outweigh the
-~20 nats per slice a static thing is worth over false alarms. A long tracklet of a real
-thing stays a distractor. In practice a tracklet that fits a static thing seen where it should be is a
-distractor, and one that does not (slices of nothing consistent, or of something seen
-far too rarely) independent false alarms.
+should have been seen and was not: a static thing seen in 2 of the 100 images that face it
+is no static thing. Left out, a 2-slice tracklet chose "distractor" (its slices fit one by
+40 nats) and then paid 100 to 300 nats of misses in every state that had it in clutter, so
+the chain put it anywhere else: its own object (a ghost), or the outlier slices of a real
+object of its class metres away, whose capped cost is a few nats; on a ``twins`` bag three
+of four chains sat 126 nats below the fourth on such a choice and never met it. A thing is
+often seen in several tracklets (a patch passed twice, a poster cut by a nearer object), so
+an image with a slice of its class over the thing's predicted bearing interval is no miss,
+whichever tracklet the slice is in: without that, the fragments of patches each paid the
+images the others saw, became independent false alarms at ~20 nats per slice, and gathered
+they were cheaper as objects (on ``clutter`` seed 1, five patches mapped where three were).
+Alone, with nothing in front of it, a thing's misses are still overcounted where other
+things hide it; that errs towards independent false alarms, which pay no misses, only for
+tracklets short enough that a few hundred nats of misses outweigh the ~20 nats per slice a
+static thing is worth over false alarms. A long tracklet of a real thing stays a distractor.
+In practice a tracklet that fits a static thing seen where it should be is a distractor, and
+one that does not (slices of nothing consistent, or of something seen far too rarely)
+independent false alarms.
 """
 
 from __future__ import annotations
