@@ -48,7 +48,7 @@ from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component, DistractorFit
-from objslam_mapper.inference.detection import MissTerms, Sightings, camera_view, sightings
+from objslam_mapper.inference.detection import Sightings, camera_view, sightings
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.exclusion import no_overlap_log_probability
 from objslam_mapper.inference.tracklets import Tracklet
@@ -197,13 +197,14 @@ class AssociationTarget:
         rows = [self.prior_row(g, m) for g, m in zip(groups, members, strict=True)]
         return members, rows
 
-    def _alone_detection(self, members: NDArray[np.int64], solution: GraphSolution, on_table: bool, kin: int) -> float:
-        """The detection term of one thing (``members`` solved alone as ``solution``): its
-        misses with nothing in front of it but its own table, if it stands on one. An image
-        where a tracklet of its class has a slice over its predicted bearing interval is no
-        miss: its other fragments' slices (clutter module docstring)."""
+    def _alone_detection(self, group: GraphGroup, solution: GraphSolution, kin: int) -> float:
+        """The detection term of one graph group solved alone as ``solution``: its misses with
+        nothing in front of it but its own table, if it stands on one. An image where a
+        tracklet of its class has a slice over its predicted bearing interval is no miss: its
+        other fragments' slices (clutter module docstring)."""
         if not self.detection.enabled:
             return 0.0
+        members = self.measurements(group)
         seen = sightings(
             self.problem,
             solution.map_T_base,
@@ -211,7 +212,7 @@ class AssociationTarget:
             [members],
             self.detection,
             self.view,
-            on_table=np.array([on_table]),
+            on_table=self.on_table([group], [members]),
             kin=np.array([kin]),
         )
         label = self.problem.measurement_label[members[0]]
@@ -222,12 +223,11 @@ class AssociationTarget:
         over = off < 0.5 * (measured[:, WIDTH] + seen.sight.width[pose, 0])
         hit = seen.hit.copy()
         hit[pose[over], 0] = True
-        return MissTerms.of(seen.should, hit, seen.kin >= 0, self.detection).log_likelihood(self.detection)
+        return dataclasses.replace(seen, hit=hit).terms(self.detection).log_likelihood(self.detection)
 
     def _distractor_misses(self, t: int, fit: DistractorFit) -> float:
         """What tracklet t's distractor pays alone (clutter module docstring)."""
-        kin = fit.prior_row if fit.unlike_class else -1
-        return self._alone_detection(self._members[t], fit.solution, False, kin)
+        return self._alone_detection((DISTRACTOR, (t,)), fit.solution, fit.prior_row if fit.unlike_class else -1)
 
     def tracklet_clutter_log_likelihood(self, t: int) -> float:
         """log L_clutter of tracklet t with the odometry alone (its component's, misses included)."""
@@ -241,11 +241,8 @@ class AssociationTarget:
         (the other tracklets' terms cancel), so neither gets the trajectory the rest of the
         map would give; each pays the misses it would alone.
         """
-        members = self._members[t]
-        solution = solve_with_backend(self.problem, [members])
-        row = int(self.problem.measurement_label[members[0]])
-        on_table = bool(self.problem.prior_mean[row, 2] > 0.0)
-        alone = solution.log_evidence + self._alone_detection(members, solution, on_table, -1)
+        solution = solve_with_backend(self.problem, [self._members[t]])
+        alone = solution.log_evidence + self._alone_detection((OBJECT, (t,)), solution, -1)
         return bool(self.tracklet_clutter_log_likelihood(t) > alone)
 
     def clutter_log_likelihood(self, state: Association) -> float:
