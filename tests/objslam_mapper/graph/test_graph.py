@@ -19,6 +19,7 @@ from objslam_common.config import load_config
 from objslam_common.geometry import between, wrap_angle
 from objslam_common.records import ImageSlices, OdometrySample, SliceMeasurement
 from objslam_mapper.config import GraphConfig, MapperConfig, OdometryNoiseConfig, SolverConfig
+from objslam_mapper.graph import solver as solver_module
 from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, with_extra_priors
@@ -269,6 +270,20 @@ def test_exact_slices_recover_the_truth_despite_perturbed_odometry(seed):
         np.testing.assert_allclose(obj.location_m, truth.location_m, atol=0.015)
         # The size prior (catalog nominal) pulls a little: true sizes are off nominal by up to 4 %.
         np.testing.assert_allclose(obj.size_m, truth.size_m, atol=0.01)
+
+
+def test_a_solve_that_ends_without_a_positive_definite_information_has_no_evidence(monkeypatch):
+    """Where damping gives up (the information is not positive definite at the last iterate),
+    there is no optimum to take a Laplace evidence at: -inf, not an exception that ends the map
+    (it did, fitting one distractor to slices of two things on a cluttered render)."""
+    run, problem = make_run(0)
+
+    def singular(*_args, **_kwargs):
+        raise np.linalg.LinAlgError("not positive definite")
+
+    monkeypatch.setattr(solver_module, "factorize", singular)
+    solution = solve(problem, run.groups(problem))
+    assert solution.log_evidence == -np.inf and not solution.converged
 
 
 def test_object_positions_are_consistent_nees():

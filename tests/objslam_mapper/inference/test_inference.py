@@ -177,9 +177,10 @@ def test_a_static_thing_seen_in_two_of_the_images_facing_it_is_false_alarms(scen
     assert beside.component(0).kind == DISTRACTOR and beside.component(1).kind == DISTRACTOR
 
 
-def test_which_distractors_share_hits_is_fixed_per_tracklet_not_by_the_state():
+def test_which_distractors_share_hits_is_fixed_per_thing_not_by_the_state():
     """The poster's tracklet shares its hits in every state where it is clutter, a real object's
-    never, however the rest of the map moves (a stretched map must not make things unlike)."""
+    never, however the rest of the map moves (a stretched map must not make things unlike);
+    tracklets that are one thing share if their slices together fit a thing unlike the class."""
     run = simulate()
     problem = problem_of(run, with_poster(run))
     chained = tracklets_of_problem(problem)
@@ -188,6 +189,7 @@ def test_which_distractors_share_hits_is_fixed_per_tracklet_not_by_the_state():
     model = target.clutter
     flags = [model.component(list(t.measurement_indices)).unlike_class for t in chained.tracklets]
     assert any(flags) and not all(flags)
+    unlike = _unlike_of(model, chained.tracklets, flags)
     n = len(chained.tracklets)
     states = [Association.of([CLUTTER] * n), Association.of(list(range(n)))]
     states += [Association.of([CLUTTER if t == k else t for t in range(n)]) for k in range(n)]
@@ -204,11 +206,82 @@ def test_which_distractors_share_hits_is_fixed_per_tracklet_not_by_the_state():
         groups = target.graph_groups(state)
         expected = [
             model.distractor_row(int(chained.tracklets[g[1][0]].measurement_indices[0]))
-            if g[0] == DISTRACTOR and flags[g[1][0]]
+            if g[0] == DISTRACTOR and unlike(g[1])
             else -1
             for g in groups
         ]
         assert list(target.kin(groups)) == expected
+
+
+def _unlike_of(model: ClutterModel, tracklets, flags):
+    def unlike(thing: tuple[int, ...]) -> bool:
+        if len(thing) == 1:
+            return flags[thing[0]]
+        return model.distractor_fit(sorted(m for t in thing for m in tracklets[t].measurement_indices)).unlike_class
+
+    return unlike
+
+
+def _split(tracklet: Tracklet, at: int) -> tuple[Tracklet, Tracklet]:
+    """A tracklet cut in two where the chaining lost it for an image (same rough position)."""
+    return (
+        dataclasses.replace(
+            tracklet, measurement_indices=tracklet.measurement_indices[:at], frame_indices=tracklet.frame_indices[:at]
+        ),
+        dataclasses.replace(
+            tracklet, measurement_indices=tracklet.measurement_indices[at:], frame_indices=tracklet.frame_indices[at:]
+        ),
+    )
+
+
+@pytest.mark.parametrize("label", ["red", "green"])
+def test_a_thing_cut_into_tracklets_is_worth_what_it_is_in_one(scene, label):
+    """Clutter tracklets that are one thing are one distractor (AssociationTarget.joins): a
+    tracklet cut in two has, in every state that keeps its halves together (one object, or
+    both clutter), the value the whole tracklet has. As two distractors (each its Occam factor,
+    its weight and the misses of the images only the other saw) clutter was dearer for a thing
+    seen in fragments, and patches became objects."""
+    _run, problem, chained = scene
+    whole = list(chained.tracklets)
+    k = max(range(len(whole)), key=lambda t: (whole[t].label == label, len(whole[t])))
+    cut = [*whole[:k], *_split(whole[k], len(whole[k]) // 2), *whole[k + 1 :]]
+    options = TargetOptions(clutter=ClutterConfig(), exclusion=False, detection=DetectionConfig(max_range_m=3.5))
+    split_target = AssociationTarget(problem, cut, options)
+    whole_target = AssociationTarget(problem, whole, options)
+    assert k + 1 in split_target.joins()[k]
+    n = len(whole)
+    for rest in (CLUTTER, "own"):
+        labels = [CLUTTER if rest == CLUTTER else t for t in range(n)]
+        for halves in (CLUTTER, n):  # both clutter, or both one object
+            whole_labels = [*labels[:k], halves, *labels[k + 1 :]]
+            cut_labels = [*labels[:k], halves, halves, *labels[k + 1 :]]
+            whole_state, cut_state = Association.of(whole_labels), Association.of(cut_labels)
+            assert split_target(cut_state) == pytest.approx(whole_target(whole_state), abs=1e-6)
+    all_clutter = split_target.graph_groups(Association.of([CLUTTER] * (n + 1)))
+    assert len(all_clutter) == len(whole_target.graph_groups(Association.of([CLUTTER] * n)))
+
+
+def test_tracklets_of_different_things_are_not_one_thing(scene):
+    """Two red objects 0.8 m apart, each seen on the way out and back: with the odometry alone a
+    pass of one joins both passes of the other (AssociationTarget.joins is judged in pairs), but
+    where whole objects are clutter, each is one thing of its own tracklets. (Where only one
+    pass of each is, those two may be gathered: a limit of judging with the odometry alone.)"""
+    run, problem, chained = scene
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=ClutterConfig(), exclusion=False))
+    true_object = {int(m): k for k, group in enumerate(run.groups(problem)) for m in group}
+    truth = [true_object[t.measurement_indices[0]] for t in chained.tracklets]
+    n = len(truth)
+    objects = sorted(set(truth))
+    states = [
+        Association.of([CLUTTER if mask >> truth[t] & 1 else t for t in range(n)]) for mask in range(1 << len(objects))
+    ]
+    gathered = set()
+    for state in states:
+        for thing in target.clutter_things(state):
+            assert len({truth[t] for t in thing}) == 1, (state, thing)
+            gathered.add(thing)
+    assert sum(len(thing) > 1 for thing in gathered) == 2  # both objects' passes, as one thing each
+    assert any(truth[a] != truth[b] for a in range(n) for b in target.joins()[a])  # the chain is there
 
 
 def test_a_distractor_explains_a_floating_poster_far_better_than_its_class():

@@ -19,7 +19,7 @@ from objslam_mapper.config import MoveConfig
 from objslam_mapper.inference.association import CLUTTER, Association, AssociationError, enumerate_associations
 from objslam_mapper.inference.chain import CachedLogTarget, MetropolisHastings, SamplerError
 from objslam_mapper.inference.exact import ExactDistribution
-from objslam_mapper.inference.moves import REVERSE_MOVE, Proposals
+from objslam_mapper.inference.moves import REVERSE_MOVE, THING_GATHER_SHARE, Proposals
 
 BELL = [1, 1, 2, 5, 15, 52, 203, 877]
 
@@ -89,15 +89,32 @@ def random_sight_lines(n: int, seed: int, span_m: float = 6.0):
     return np.column_stack([rng.uniform(0.0, span_m, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
 
 
-@pytest.mark.parametrize("with_sight_lines", [False, True])
-def test_proposal_probabilities_are_exact(with_sight_lines):
+def things_by_class(labels):
+    """A fixed ``clutter_things``: the clutter tracklets of a class are one thing."""
+
+    def things(state: Association) -> list[tuple[int, ...]]:
+        by_class: dict[str, list[int]] = {}
+        for t in state.clutter:
+            by_class.setdefault(labels[t], []).append(t)
+        return [tuple(members) for members in by_class.values()]
+
+    return things
+
+
+@pytest.mark.parametrize(("with_sight_lines", "with_things"), [(False, False), (True, False), (False, True)])
+def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
     """Every reported q(J -> J') equals its sampling frequency, and the reverse q reported
     with a move equals the forward q of the reverse move from J'."""
     labels = ["r", "r", "r", "r", "g", "g"]
     states, scores, positions, weights = random_problem(labels, seed=3, span_m=4.0)
     lines = random_sight_lines(len(labels), seed=4, span_m=4.0) if with_sight_lines else None
     sampler = MetropolisHastings(
-        labels, scores.__getitem__, positions_xy_m=positions, tracklet_weights=weights, sight_lines=lines
+        labels,
+        scores.__getitem__,
+        positions_xy_m=positions,
+        tracklet_weights=weights,
+        sight_lines=lines,
+        clutter_things=things_by_class(labels) if with_things else None,
     )
     rng = np.random.default_rng(0)
     draws = 200
@@ -144,13 +161,19 @@ def test_proposals_respect_classes_and_clutter_switch():
 # ---- the chain against the exact distribution -------------------------------------------
 
 
-def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False, moves=None):
+def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False, moves=None, things=False):
     states, scores, positions, weights = random_problem(labels, seed=seed, clutter=clutter)
     exact = ExactDistribution.of(states, scores.__getitem__)
     sampler = MetropolisHastings(labels, scores.__getitem__)
     lines = random_sight_lines(len(labels), seed + 50) if sight_lines else None
     sampler.proposals = proposals_cls(
-        labels, moves, positions_xy_m=positions, tracklet_weights=weights, allow_clutter=clutter, sight_lines=lines
+        labels,
+        moves,
+        positions_xy_m=positions,
+        tracklet_weights=weights,
+        allow_clutter=clutter,
+        sight_lines=lines,
+        clutter_things=things_by_class(labels) if things else None,
     )
     start = Association.of([CLUTTER] * len(labels) if clutter else range(len(labels)))
     result = sampler.run(start, steps, 1000, np.random.default_rng(100 + seed), keep_trace=False)
@@ -164,6 +187,7 @@ CASES = {
     "3+2 tracklets, clutter": (["r", "r", "r", "g", "g"], True, 1, 150_000),
     "4+3 tracklets, no clutter": (["r", "r", "r", "r", "g", "g", "g"], False, 1, 150_000),
     "3+2 tracklets, clutter, lines of sight": (["r", "r", "r", "g", "g"], True, 2, 150_000),
+    "3+2 tracklets, clutter, clutter things": (["r", "r", "r", "g", "g"], True, 1, 150_000),
 }
 
 
@@ -171,7 +195,9 @@ CASES = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_chain_visits_states_with_their_exact_probabilities(case):
     labels, clutter, seed, steps = CASES[case]
-    tv, result = run_chain(Proposals, labels, clutter, seed, steps, sight_lines="lines of sight" in case)
+    tv, result = run_chain(
+        Proposals, labels, clutter, seed, steps, sight_lines="lines of sight" in case, things="things" in case
+    )
     assert tv < 0.05
     assert result.distinct_visited == len(enumerate_associations(labels, clutter))
 
@@ -214,6 +240,20 @@ class GathersFromOneSeed(Proposals):
         return super()._log_gather(view, members) - math.log(len(members) * (len(members) - 1))
 
 
+class ForgetsWholeThings(Proposals):
+    """Broken on purpose: a gather's probability leaves out that it may gather a whole thing."""
+
+    def _log_gather(self, view, members):
+        things = self._things(view)
+        if not things:
+            return super()._log_gather(view, members)
+        view.things = []
+        try:
+            return super()._log_gather(view, members) + math.log1p(-THING_GATHER_SHARE)
+        finally:
+            view.things = things
+
+
 # Group moves on their own (no merge/split), so a wrong gather ratio is not washed out.
 GROUP_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve=0.3, gather=0.3)
 
@@ -225,6 +265,7 @@ GROUP_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve=0.3, gat
         (ForgetsReverseDestination, None),
         (HalvesBipartitions, MoveConfig(dissolve=0.0, gather=0.0)),
         (GathersFromOneSeed, GROUP_MOVES),
+        (ForgetsWholeThings, GROUP_MOVES),
     ],
 )
 def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken, moves):
@@ -232,10 +273,11 @@ def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken, moves):
     labels, clutter, seed, steps = (
         CASES["3+2 tracklets, clutter"] if moves is GROUP_MOVES else CASES["2+2 tracklets, clutter"]
     )
-    tv, _ = run_chain(broken, labels, clutter, seed, steps, moves=moves)
+    things = broken is ForgetsWholeThings
+    tv, _ = run_chain(broken, labels, clutter, seed, steps, moves=moves, things=things)
     assert tv > 0.08
     if moves is GROUP_MOVES:  # the same moves, unbroken, pass
-        assert run_chain(Proposals, labels, clutter, seed, steps, moves=moves)[0] < 0.05
+        assert run_chain(Proposals, labels, clutter, seed, steps, moves=moves, things=things)[0] < 0.05
 
 
 # ---- the run's bookkeeping ----------------------------------------------------------------

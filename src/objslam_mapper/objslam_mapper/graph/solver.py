@@ -219,7 +219,15 @@ def solve(
         iterations += more
     poses, objects, calib = state
     if final is None:
-        final = factorize(graph, lin, 0.0)
+        try:
+            final = factorize(graph, lin, 0.0)
+        except np.linalg.LinAlgError:
+            # Damping gave up where the information is not positive definite: no optimum, so
+            # no Laplace evidence (seen fitting one distractor to slices of two things).
+            logger.debug("solve ended where the information is not positive definite: no evidence")
+            return make_solution(
+                keyframes, layout, state, SolveOutcome(iterations, False, -np.inf, 2.0 * lin.cost, np.nan)
+            )
     if not converged:
         logger.debug("solve stopped after %d linearizations without converging (cost %.6g)", iterations, lin.cost)
 

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike
 from objslam_mapper.config import MoveConfig, ScreenConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
-from objslam_mapper.inference.moves import Proposal, Proposals
+from objslam_mapper.inference.moves import ClutterThings, Proposal, Proposals
 
 PROGRESS_MAX_STEPS = 500  # a cancelled build stops within this many steps of a chain
 
@@ -178,9 +178,16 @@ class MetropolisHastings:
         screen: Screen | None = None,
         screen_config: ScreenConfig | None = None,
         sight_lines: ArrayLike | None = None,
+        clutter_things: ClutterThings | None = None,
     ):
         self.proposals = Proposals(
-            labels, moves, positions_xy_m, tracklet_weights, allow_clutter, sight_lines=sight_lines
+            labels,
+            moves,
+            positions_xy_m,
+            tracklet_weights,
+            allow_clutter,
+            sight_lines=sight_lines,
+            clutter_things=clutter_things,
         )
         self.screen = screen
         config = screen_config or ScreenConfig()

@@ -141,6 +141,7 @@ def run_chain_task(task: ChainTask, progress: ChainProgress | None = None) -> Ch
         allow_clutter=config.clutter.enabled,
         screen=screen if config.screen.enabled else None,
         screen_config=config.screen,
+        clutter_things=target.clutter_things,
     )
     result = sampler.run(
         start.state,

@@ -27,8 +27,9 @@ a static distractor (weight ``distractor_weight``)
     geometry*: the same slice model, but with broad priors on ``z_base`` and size
     (``distractor_z_base_stddev_m``, ``distractor_size_stddev_m``) instead of the class
     priors. A distractor is a thing in the world like an object, so it is part of the
-    factor graph: each distractor tracklet of the clutter set is one more variable of the
-    association's graph, with those priors (:meth:`.target.AssociationTarget.graph_groups`), and its
+    factor graph: each distractor of the clutter set (one tracklet, or several that are one
+    thing) is one more variable of the association's graph, with those priors
+    (:meth:`.target.AssociationTarget.graph_groups`), and its
     ``log L`` is what it adds to the graph's Laplace evidence, plus ``log w``. It thus
     gets the trajectory the whole map pins down, as an object does: a tracklet's slices
     fit the map's trajectory better than the odometry alone (on the ``clutter`` scenario
@@ -157,6 +158,16 @@ class ClutterModel:
         sigmas = np.abs(shape - self.problem.prior_mean[label, 2:]) / self.problem.prior_stddev[label, 2:]
         return DistractorFit(solution, row, bool(sigmas.max() > UNLIKE_CLASS_SIGMAS))
 
+    def distractor(self, measurement_indices: ArrayLike, misses: MissPrice | None = None) -> Component:
+        """The slices as one static distractor with the odometry alone, its missed detections
+        priced by ``misses`` (none if not given)."""
+        fit = self.distractor_fit(measurement_indices)
+        value = fit.solution.log_evidence
+        if misses is not None and np.isfinite(value):
+            value += misses(fit)
+        log_w = math.log(self.config.distractor_weight)
+        return Component(DISTRACTOR, log_w, log_w + value, fit.unlike_class)
+
     def component(self, measurement_indices: ArrayLike, misses: MissPrice | None = None) -> Component:
         """The component that explains a tracklet: the likelier one with the odometry alone,
         a distractor's missed detections priced by ``misses`` (none if not given; module docstring)."""
@@ -164,8 +175,7 @@ class ClutterModel:
         independent = self.config.log_likelihood(np.size(measurement_indices))
         if w == 0.0:
             return Component(INDEPENDENT, independent, independent)
-        fit = self.distractor_fit(measurement_indices)
-        distractor = fit.solution.log_evidence + (0.0 if misses is None else misses(fit))
-        if w == 1.0 or math.log(w) + distractor > math.log1p(-w) + independent:
-            return Component(DISTRACTOR, math.log(w), math.log(w) + distractor, fit.unlike_class)
+        distractor = self.distractor(measurement_indices, misses)
+        if w == 1.0 or distractor.alone_log_likelihood > math.log1p(-w) + independent:
+            return distractor
         return Component(INDEPENDENT, math.log1p(-w) + independent, math.log1p(-w) + independent)

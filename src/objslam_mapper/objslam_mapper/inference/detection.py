@@ -48,13 +48,16 @@ few misses of real objects; at the default ``P_d = 0.7`` a miss costs 1.2 nats, 
 object owns is worth about 20 to it, so a real object is never lost to them, while a ghost
 in view of hundreds of images without a detection pays hundreds of nats.
 
-One exception: a distractor is one clutter tracklet, so a poster seen in several tracklets is
-several distractors at one place, each of which would pay a miss in every image where only
-the others have slices. On ``clutter`` a cyan poster's two tracklets paid 157 and 301 misses
-more as distractors than as two cyan objects a metre in front of the wall, and the target
-mapped the poster twice at P = 1.00. Distractors of one class whose footprints overlap
-therefore share their hits (:func:`shared_hits`): an image where one of them has a slice is
-no miss for the others. Only those unlike any object of their class share
+One exception: a distractor was one clutter tracklet, so a poster seen in several tracklets
+was several distractors at one place, each of which would pay a miss in every image where
+only the others have slices (clutter tracklets that one distractor explains better together
+are now one, :meth:`~objslam_mapper.inference.target.AssociationTarget.clutter_things`;
+those that are not, as when their joint fit is worse, still are several). On ``clutter`` a
+cyan poster's two tracklets paid 157 and 301 misses more as distractors than as two cyan
+objects a metre in front of the wall, and the target mapped the poster twice at P = 1.00.
+Distractors of one class whose footprints overlap therefore share their hits
+(:func:`shared_hits`): an image where one of them has a slice is no miss for the others.
+Only those unlike any object of their class share
 (:meth:`~objslam_mapper.inference.target.AssociationTarget.kin`): otherwise a real object's
 tracklets could leave it for fragments that pay the misses of one thing with the freedom of
 several (on ``clutter`` two real objects did). Objects never share hits: of two objects at
