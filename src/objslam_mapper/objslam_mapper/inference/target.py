@@ -140,8 +140,7 @@ class AssociationTarget:
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
         self._anchor: GraphSolution | None = None
-        self._components: dict[int, Component] = {}
-        self._joined: dict[tuple[int, ...], Component] = {}
+        self._thing_components: dict[tuple[int, ...], Component] = {}
         self._join_graph: list[set[int]] | None = None
         self._things: OrderedDict[Association, list[tuple[int, ...]]] = OrderedDict()
         # Per state: how its graph groups appear, and the poses that was computed at.
@@ -149,27 +148,20 @@ class AssociationTarget:
 
     def component(self, t: int) -> Component:
         """How tracklet t is explained when it is clutter on its own (one distractor solve, remembered)."""
-        if t not in self._components:
-            start = time.perf_counter()
-            self._components[t] = self.clutter.component(
-                self._members[t], lambda fit: self._distractor_misses((t,), fit)
-            )
-            self.work.clutter_solves += 1
-            self.work.clutter_seconds += time.perf_counter() - start
-        return self._components[t]
+        return self.thing_component((t,))
 
     def thing_component(self, thing: tuple[int, ...]) -> Component:
         """How clutter tracklets that are one thing (:meth:`clutter_things`) are explained: a
-        tracklet alone by its own component; several by one distractor (remembered)."""
-        if len(thing) == 1:
-            return self.component(thing[0])
-        if thing not in self._joined:
+        tracklet alone by the likelier clutter component; several by one distractor (remembered)."""
+        if thing not in self._thing_components:
             start = time.perf_counter()
-            members = self.measurements((DISTRACTOR, thing))
-            self._joined[thing] = self.clutter.distractor(members, lambda fit: self._distractor_misses(thing, fit))
+            explain = self.clutter.component if len(thing) == 1 else self.clutter.distractor
+            self._thing_components[thing] = explain(
+                self.measurements((DISTRACTOR, thing)), lambda fit: self._distractor_misses(thing, fit)
+            )
             self.work.clutter_solves += 1
             self.work.clutter_seconds += time.perf_counter() - start
-        return self._joined[thing]
+        return self._thing_components[thing]
 
     def joins(self) -> list[set[int]]:
         """Per tracklet, the tracklets it is one thing with when both are clutter: those of its
@@ -188,21 +180,21 @@ class AssociationTarget:
             graph: list[set[int]] = [set() for _ in range(n)]
             if self.options.clutter.distractor_weight > 0.0:
                 xy = np.array([t.position_xy_m for t in self.tracklets], dtype=float).reshape(-1, 2)
-                for a in range(n):
-                    for b in range(a + 1, n):
-                        if self.tracklets[a].label != self.tracklets[b].label:
-                            continue
-                        if np.hypot(*(xy[a] - xy[b])) >= JOIN_RADIUS_M:
-                            continue
-                        apart = self.component(a).alone_log_likelihood + self.component(b).alone_log_likelihood
-                        if self.thing_component((a, b)).alone_log_likelihood > apart:
-                            graph[a].add(b)
-                            graph[b].add(a)
+                labels = np.array([t.label for t in self.tracklets])
+                near = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) < JOIN_RADIUS_M
+                for a, b in zip(*np.nonzero(np.triu(near & (labels[:, None] == labels[None, :]), k=1)), strict=True):
+                    if self._join_gain(int(a), int(b)) > 0.0:
+                        graph[a].add(int(b))
+                        graph[b].add(int(a))
             self._join_graph = graph
         return self._join_graph
 
     def _value(self, thing: tuple[int, ...]) -> float:
         return self.thing_component(thing).alone_log_likelihood
+
+    def _join_gain(self, a: int, b: int) -> float:
+        """How much likelier tracklets a < b are as one thing than each on its own."""
+        return self._value((a, b)) - self._value((a,)) - self._value((b,))
 
     def clutter_things(self, state: Association) -> list[tuple[int, ...]]:
         """The things ``state``'s clutter tracklets are, in order of their first tracklet.
@@ -220,7 +212,7 @@ class AssociationTarget:
         graph = self.joins()
         clutter = set(state.clutter)
         pairs = [(a, b) for a in state.clutter for b in sorted(graph[a] & clutter) if a < b]
-        pairs.sort(key=lambda p: (-(self._value(p) - self._value(p[:1]) - self._value(p[1:])), p))
+        pairs.sort(key=lambda p: (-self._join_gain(*p), p))
         part_of: dict[int, tuple[int, ...]] = {t: (t,) for t in state.clutter}
         for a, b in pairs:
             first, second = part_of[a], part_of[b]
