@@ -23,7 +23,7 @@ from objslam_mapper.inference.detection import (
     detection_log_likelihood,
     hidden,
     own_rate_log_likelihood,
-    shared_hits,
+    share,
     sight,
     sightings,
     table_sight,
@@ -107,9 +107,31 @@ def test_fragments_of_one_distractor_share_their_hits_and_objects_do_not():
     assert alone.missed.sum(axis=0).tolist() == [5, 5, 5, 5]
     # Another class at the same place shares nothing.
     hit = np.eye(2, dtype=bool)
+    should = np.ones((2, 2), dtype=bool)
     footprint = np.array([[0.0, 0.0], [0.0, 0.0], [0.3, 0.3]])
-    assert shared_hits(hit, footprint, np.array([3, 4])).tolist() == hit.tolist()
-    assert shared_hits(hit, footprint, np.array([3, 3])).tolist() == [[True, True], [True, True]]
+    assert [a.tolist() for a in share(hit, should, footprint, np.array([3, 4]))] == [hit.tolist(), should.tolist()]
+    shared_hit, counted = share(hit, should, footprint, np.array([3, 3]))
+    assert shared_hit.tolist() == [[True, True], [True, True]]
+    assert counted.tolist() == [[True, False], [True, False]]
+
+
+def test_fragments_of_one_distractor_are_missed_once_per_image():
+    """Four fragments of one poster (four passes of a loop, four distractors at one place) and
+    an image between the passes where the poster should be seen and none has a slice: the
+    thing is missed there once, not once per fragment. Fragments apart, or of another kind,
+    count their own."""
+    hit = np.zeros((3, 4), dtype=bool)
+    hit[0, 0] = hit[1, 1] = True  # image 2: no slice of any fragment
+    should = np.ones((3, 4), dtype=bool)
+    together = np.array([[0.0, 0.1, 0.0, 0.05], [0.0, 0.0, 0.1, 0.05], [0.25, 0.25, 0.25, 0.25]])
+    for kin, footprint, misses in (
+        ([3, 3, 3, 3], together, 1),
+        ([3, 4, 3, 4], together, 2 + 2),  # two kinds at one place: one thing of each, missed twice
+        ([3, 3, 3, 3], together * [[1.0], [1.0], [0.01]], 2 + 2 + 3 + 3),  # too small to overlap
+        ([-1, -1, -1, -1], together, 2 + 2 + 3 + 3),  # objects and distractors like their class
+    ):
+        shared_hit, counted = share(hit, should, footprint, np.array(kin))
+        assert int(np.count_nonzero(counted & ~shared_hit)) == misses, kin
 
 
 EVERYWHERE_BUT_HIGH = View(1.5)

@@ -441,6 +441,33 @@ def test_a_start_object_made_of_a_patch_seen_twice_is_cleared_to_clutter():
     assert target(cleared) > target(joined)
 
 
+def test_the_start_leaves_an_object_whose_clutter_would_be_shaped_like_its_class_to_the_chain():
+    """Of the patch and the real object, only the patch is cleared, even with a target that
+    prefers the real object in clutter too (as one drifting odometry may: a distractor's free
+    size absorbs it): as clutter the object's tracklets would be distractors shaped like their
+    class, and whether they are is the chain's question, not the start's."""
+    yellow = SyntheticObject("yellow", (2.5, 1.3, 0.0), (0.52, 0.29))
+    patch = SyntheticObject("blue", (1.5, -1.2, 0.0), (0.18, 0.003))
+    problem = problem_of(simulate((yellow, patch)))
+    chained = tracklets_of_problem(problem)
+
+    class PrefersClutter(AssociationTarget):
+        def __call__(self, state):
+            return super().__call__(state) + 1000.0 * len(state.clutter)
+
+    target = PrefersClutter(problem, chained.tracklets, TargetOptions(clutter=ClutterConfig()))
+    blue = [t for t, label in enumerate(chained.labels) if label == "blue"]
+    joined = Association.of([0 if t in blue else 1 for t in range(len(chained.labels))])
+    all_clutter = Association.of([CLUTTER] * len(chained.labels))
+    kinds = {
+        chained.labels[th[0]]: (target.thing_component(th).kind, target.thing_component(th).unlike_class)
+        for th in target.clutter_things(all_clutter)
+    }
+    assert kinds == {"yellow": (DISTRACTOR, False), "blue": (DISTRACTOR, True)}
+    cleared, moved = clear_start_objects(ProposalScreen(target), joined)
+    assert moved == blue and cleared.n_objects == 1
+
+
 def test_start_tracklets_left_in_clutter_join_their_object_and_a_poster_stays():
     """The start left one red tracklet in clutter (as a short look alone may be): the greedy
     pass puts it into its object. The poster's tracklet is offered to the green object

@@ -40,7 +40,7 @@ from objslam_mapper.inference.detection import (
     MissTerms,
     Sight,
     hit_matrix,
-    shared_hits,
+    share,
     sight,
     table_sight,
     visible,
@@ -145,7 +145,7 @@ class ProposalScreen:
     ) -> float:
         """Change of the detection term from ``state`` (graph groups ``old_groups``) to the
         association of ``new_groups`` over the groups the move changes, and over the kept
-        distractors when the move adds or takes one (they share hits: detection.shared_hits),
+        distractors when the move adds or takes one (fragments of one thing: detection.share),
         at the screen's fixed poses and estimates (how the move changes what hides the others
         is left to the target: see the module docstring)."""
         target = self.target
@@ -173,12 +173,12 @@ class ProposalScreen:
             footprints = fresh.footprint
         recounted = [target.measurements(old_groups[k]) for k in recount]
         kin = np.concatenate([old_kin[recount], gained_kin])
-        hit = shared_hits(
+        hit, should = share(
             hit_matrix(target.problem, len(poses), recounted + gained_members),
+            np.hstack([seen.visible[:, recount], shown]),
             np.hstack([seen.sight.footprint[:, recount], footprints]),
             kin,
         )
-        should = np.hstack([seen.should[:, recount], shown])
         after = MissTerms.of(should, hit, kin >= 0, target.detection)
         return (after - before).log_likelihood(target.detection)
 

@@ -255,7 +255,7 @@ class AssociationTarget:
 
     def kin(self, groups: Sequence[GraphGroup]) -> NDArray[np.int64]:
         """Which of ``groups`` share their hits in the detection term
-        (objslam_mapper.inference.detection.shared_hits): a distractor unlike any object of its
+        (objslam_mapper.inference.detection.share): a distractor unlike any object of its
         class (:attr:`.clutter.Component.unlike_class`) gets its class's distractor prior row,
         the rest -1. A thing shaped like its class is left to pay its own misses: its tracklets
         can join as one object, and sharing would let a real object escape into fragments that
