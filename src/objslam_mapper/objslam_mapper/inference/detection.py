@@ -322,7 +322,7 @@ class Sightings:
     hidden: NDArray[np.bool_]
     hit: NDArray[np.bool_]
     kin: NDArray[np.int64]  # (K,) which share their hits and are detected at a rate of their own (-1: none)
-    repeated: NDArray[np.bool_] | None = None  # None: nowhere
+    repeated: NDArray[np.bool_]
 
     @property
     def visible(self) -> NDArray[np.bool_]:
@@ -333,7 +333,7 @@ class Sightings:
     def should(self) -> NDArray[np.bool_]:
         """(N, K) images where a thing should be seen and counts: visible, and no fragment of
         its thing before it counts the image already."""
-        return self.visible if self.repeated is None else self.visible & ~self.repeated
+        return self.visible & ~self.repeated
 
     @property
     def missed(self) -> NDArray[np.bool_]:

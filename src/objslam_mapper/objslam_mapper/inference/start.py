@@ -113,7 +113,8 @@ def _take_if_better(
 def _only_like_their_class(target: AssociationTarget, state: Association, tracklets: Collection[int]) -> bool:
     """Whether every clutter thing of ``state`` holding one of ``tracklets`` is a distractor
     shaped like its class (:attr:`.clutter.Component.unlike_class` false)."""
-    things = [th for th in target.clutter_things(state) if set(th) & set(tracklets)]
+    wanted = set(tracklets)
+    things = [th for th in target.clutter_things(state) if wanted.intersection(th)]
     return all(
         component.kind == DISTRACTOR and not component.unlike_class
         for component in (target.thing_component(th) for th in things)

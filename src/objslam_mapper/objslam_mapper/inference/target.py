@@ -254,7 +254,7 @@ class AssociationTarget:
         )
 
     def kin(self, groups: Sequence[GraphGroup]) -> NDArray[np.int64]:
-        """Which of ``groups`` share their hits in the detection term
+        """Which of ``groups`` share their hits and misses in the detection term
         (objslam_mapper.inference.detection.share): a distractor unlike any object of its
         class (:attr:`.clutter.Component.unlike_class`) gets its class's distractor prior row,
         the rest -1. A thing shaped like its class is left to pay its own misses: its tracklets
