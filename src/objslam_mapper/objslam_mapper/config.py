@@ -346,6 +346,11 @@ class ClutterConfig:
     distractor_size_stddev_m: float = setting(
         0.5, "prior stddev of a distractor's diameter and height around its class's (m)", minimum=1e-3
     )
+    distractor_floor_stddev_m: float = setting(
+        0.05,
+        "a distractor's base may sink this far under the floor at one stddev (m; one-sided, 0: no floor)",
+        minimum=0.0,
+    )
 
     def __post_init__(self) -> None:
         if self.max_elevation_rad <= self.min_elevation_rad:

@@ -30,7 +30,7 @@ from objslam_mapper.graph.gtsam_backend import (
     solve_gtsam,
 )
 from objslam_mapper.graph.keyframes import keyframes_of
-from objslam_mapper.graph.problem import build_problem
+from objslam_mapper.graph.problem import build_problem, with_extra_priors
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.model.slice_model import bounds_of_cuts, predict_slices
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
@@ -222,6 +222,31 @@ def test_factor_jacobians_match_finite_differences(reference, per_detection, win
         assert checked == 1 + (N_POSES - 1) + sum(len(g) for g in groups)
     else:
         assert checked >= 2 + len(groups)
+
+
+def test_a_thing_pulled_below_the_floor_solves_to_the_same_numbers(reference):
+    """A prior row with a floor factor (objslam_mapper.model.floor) whose prior wants the
+    base 0.5 m under the floor: the factor is active at the MAP of both backends."""
+    problem, groups, _ = reference
+    rows = [int(problem.measurement_label[g[0]]) for g in groups]
+    mean, stddev = np.array(problem.prior_mean[rows[0]]), np.array(problem.prior_stddev[rows[0]])
+    mean[2], stddev[2] = -0.5, 0.02
+    problem, rows[0] = with_extra_priors(problem, mean, stddev, floor_stddev_m=0.2)
+    ours = solve(problem, groups, with_covariances=True, priors=rows)
+    assert ours.objects[0].location_m[2] < -0.01
+    for drive in ("python", "optimizer"):
+        assert_same_solution(solve_gtsam(problem, groups, with_covariances=True, drive=drive, priors=rows), ours)
+    graph, keys = build_gtsam_graph(problem, groups, priors=rows)
+    poses, objects, calibration = state(ours)
+    floors = [graph.at(i) for i in range(graph.size()) if isinstance(graph.at(i), gtsam.CustomFactor)]
+    floors = [f for f in floors if f.dim() == 1]
+    assert len(floors) == 1
+    for z_base in (-0.2, 0.3):  # below the floor, and above it (no residual, no Jacobian)
+        objects[0, 2] = z_base
+        values = keys.to_values(poses, objects, calibration)
+        np.testing.assert_allclose(floors[0].whitenedError(values), [min(z_base, 0.0) / 0.2])
+        analytic, _ = gtsam.JacobianFactor(floors[0].linearize(values)).jacobian()
+        np.testing.assert_allclose(analytic, numerical_jacobian(floors[0], values), atol=1e-8)
 
 
 def test_outlier_slices_cost_their_cap_and_carry_no_information(reference):

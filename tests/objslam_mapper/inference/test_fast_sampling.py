@@ -161,27 +161,27 @@ def test_a_screen_that_ignores_the_reverse_stage_is_caught():
 # ---- the conditional object evidence against an independent computation ------------------------
 
 
-def _whitened_residuals(problem, poses, group, state):
+def _whitened_residuals(problem, poses, group, state, row):
     from objslam_common.geometry import wrap_angle
     from objslam_mapper.model.slice_model import censor, predict_reduced
 
-    label = int(problem.measurement_label[group[0]])
     pred = predict_reduced(poses[problem.measurement_pose[group]], state[:3], state[3:], problem.mount, jacobians=False)
     res = pred.values - problem.measurements[group].T
     res[0] = wrap_angle(res[0])
     res = res / problem.measurement_stddev[group].T
     res *= censor(res, problem.measurement_bounds[group])
-    prior = (state - problem.prior_mean[label]) / problem.prior_stddev[label]
-    return np.concatenate([res.ravel(), prior])
+    prior = (state - problem.prior_mean[row]) / problem.prior_stddev[row]
+    floor = min(state[2], 0.0) / problem.prior_floor_stddev[row]  # 0 without a floor factor (inf)
+    return np.concatenate([res.ravel(), prior, [floor]])
 
 
-@pytest.mark.parametrize("censored", ["measured", "upper-edges-cut", "every-edge-cut"])
+@pytest.mark.parametrize("censored", ["measured", "upper-edges-cut", "every-edge-cut", "pulled-below-the-floor"])
 def test_conditional_object_evidence_matches_finite_differences_and_the_full_map(office, censored):
     import dataclasses
 
     from objslam_mapper.graph.conditional_evidence import object_evidence
     from objslam_mapper.graph.initialization import initial_object
-    from objslam_mapper.graph.problem import LOG_2PI
+    from objslam_mapper.graph.problem import LOG_2PI, with_extra_priors
     from objslam_mapper.model.slice_model import bounds_of_cuts
 
     run, problem = office
@@ -201,35 +201,43 @@ def test_conditional_object_evidence_matches_finite_differences_and_the_full_map
         cuts = np.where(cut, np.arange(problem.measurement_count) % 16, 0)
         measured[cut] += 0.02 * sign[:, None] * np.array([1.0, -1.0, -1.0, 1.0])
         bounds = bounds_of_cuts(cuts, np.zeros(cut.shape, bool))
-    if censored != "measured":
+    if censored in ("upper-edges-cut", "every-edge-cut"):
         problem = dataclasses.replace(problem, measurements=measured, measurement_bounds=bounds)
         assert cut[np.asarray(groups[0])].any()
+    rows = [int(problem.measurement_label[g[0]]) for g in groups]
+    if censored == "pulled-below-the-floor":
+        # The first object under a prior that wants its base 0.3 m under the floor, against
+        # a floor factor (objslam_mapper.model.floor): active at the MAP.
+        mean, stddev = np.array(problem.prior_mean[rows[0]]), np.array(problem.prior_stddev[rows[0]])
+        mean[2], stddev[2] = -0.5, 0.02
+        problem, rows[0] = with_extra_priors(problem, mean, stddev, floor_stddev_m=0.2)
     # Solved to the optimum (not just within the default cost tolerance): the comparison is at 1e-5 m.
     tight = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, absolute_tolerance=1e-10))
-    full = solve(tight, groups)
+    full = solve(tight, groups, priors=rows)
     poses = np.asarray(full.map_T_base)
     group = np.asarray(groups[0], dtype=np.int64)
-    label = int(problem.measurement_label[group[0]])
+    start = initial_object(problem, group, poses)
     result = object_evidence(
-        problem, poses, group, initial_object(problem, group, poses), absolute_tolerance=1e-12, relative_tolerance=0.0
+        problem, poses, group, start, absolute_tolerance=1e-12, relative_tolerance=0.0, prior=rows[0]
     )
     assert result.converged
+    assert (result.object_state[2] < -0.01) == (censored == "pulled-below-the-floor")
     # With the poses at the full MAP, the object's conditional MAP is the full MAP's object.
     expected = np.concatenate([full.objects[0].location_m, full.objects[0].size_m])
     np.testing.assert_allclose(result.object_state, expected, atol=1e-5)
     # Laplace evidence recomputed from residuals and a finite-difference Jacobian.
-    r = _whitened_residuals(problem, poses, group, result.object_state)
+    r = _whitened_residuals(problem, poses, group, result.object_state, rows[0])
     step = 1e-6
     jac = np.column_stack(
         [
             (
-                _whitened_residuals(problem, poses, group, result.object_state + step * e)
-                - _whitened_residuals(problem, poses, group, result.object_state - step * e)
+                _whitened_residuals(problem, poses, group, result.object_state + step * e, rows[0])
+                - _whitened_residuals(problem, poses, group, result.object_state - step * e, rows[0])
             )
             / (2 * step)
             for e in np.eye(5)
         ]
     )
-    normalizer = np.sum(problem.measurement_log_normalizer[group]) + problem.prior_log_normalizer[label]
+    normalizer = np.sum(problem.measurement_log_normalizer[group]) + problem.prior_log_normalizer[rows[0]]
     independent = -0.5 * r @ r + normalizer + 2.5 * LOG_2PI - 0.5 * np.linalg.slogdet(jac.T @ jac)[1]
     assert result.log_evidence == pytest.approx(independent, abs=1e-4)

@@ -136,6 +136,27 @@ def test_each_tracklet_takes_the_likelier_clutter_component(scene):
     assert solve(problem, [members]).log_evidence > distractor > independent
 
 
+def test_a_distractor_under_the_floor_pays_for_it(scene):
+    """With the camera believed lower than it is, a floor object's slices put a distractor's
+    base under the floor (what a map grown about the camera does to every thing): the floor
+    factor makes that cost, and costs next to nothing where the base is on the floor."""
+    _run, problem, chained = scene
+    members = list(chained.tracklets[chained.labels.index("green")].measurement_indices)
+    config = ClutterConfig()
+    no_floor = dataclasses.replace(config, distractor_floor_stddev_m=0.0)
+    lowered = dataclasses.replace(
+        problem, mount=dataclasses.replace(problem.mount, height_m=0.6 * problem.mount.height_m)
+    )
+    sunk = ClutterModel(lowered, no_floor).distractor_fit(members).solution
+    assert sunk.objects[0].location_m[2] < -0.1
+    held = ClutterModel(lowered, config).distractor_fit(members).solution
+    # Held up (and nearer), at a price: the slices pin the base relative to the camera.
+    assert held.objects[0].location_m[2] > sunk.objects[0].location_m[2] + 0.02
+    assert held.log_evidence < sunk.log_evidence - 10.0
+    on_floor = [ClutterModel(problem, c).distractor_fit(members).solution.log_evidence for c in (config, no_floor)]
+    assert on_floor[0] == pytest.approx(on_floor[1], abs=1.0)
+
+
 def test_a_static_thing_seen_in_two_of_the_images_facing_it_is_false_alarms(scene):
     """The choice of clutter component prices a distractor's misses: two slices of a real
     object (its tracklet's first and last) fit a static thing, but alone they would miss in

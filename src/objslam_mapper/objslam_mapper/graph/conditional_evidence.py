@@ -2,7 +2,7 @@ r"""One object's Laplace evidence with the robot's poses held fixed (the sampler
 
 With the poses fixed at ``P`` the factor graph of an association falls apart into one
 small problem per object: its slice factors and its class prior over its 5 variables
-(x, y, z_base, diameter, height). Its Laplace evidence is
+(x, y, z_base, diameter, height), and a distractor's floor factor. Its Laplace evidence is
 
     log e_P(G) = -cost_G(o*) + sum_{k in G} -1/2 log|2 pi Sigma_k| + prior normalizer
                  + 5/2 log 2 pi - 1/2 log|Lambda_oo(o*)|,
@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from objslam_mapper.graph.linearize import OBJECT_COLUMNS
 from objslam_mapper.graph.problem import LOG_2PI, OBJECT_DIM, GraphProblem
+from objslam_mapper.model.floor import floor_jacobian, floor_residual
 from objslam_mapper.model.outliers import WARM_START_CAP_SCALES, half_chi2, truncate
 from objslam_mapper.model.slice_model import predict_reduced, whitened_slice_error
 
@@ -76,6 +77,7 @@ class _ObjectSystem:
         self.cap_scale = 1.0  # as AssociationSystem.cap_scale
         self.prior_mean = problem.prior_mean[row]
         self.prior_inv_sigma = 1.0 / problem.prior_stddev[row]
+        self.floor_inv_sigma = 1.0 / problem.prior_floor_stddev[row]  # 0: no floor factor
         self.mount = problem.mount
         self.log_normalizer = float(np.sum(problem.measurement_log_normalizer[group])) + float(
             problem.prior_log_normalizer[row]
@@ -94,11 +96,15 @@ class _ObjectSystem:
             weight = weight * truncate(res, self.outlier_cost * self.cap_scale, half)
         jac = pred.jacobian[:, OBJECT_COLUMNS] * weight[:, None, :]  # (4, 5, A)
         prior = (state - self.prior_mean) * self.prior_inv_sigma
-        cost = 0.5 * float(np.sum(res * res) + prior @ prior)
+        floor = float(floor_residual(state[2], self.floor_inv_sigma))
+        floor_jac = float(floor_jacobian(state[2], self.floor_inv_sigma))
+        cost = 0.5 * float(np.sum(res * res) + prior @ prior + floor * floor)
         flat = jac.transpose(1, 0, 2).reshape(OBJECT_DIM, -1)
         info = flat @ flat.T
         info[np.diag_indices(OBJECT_DIM)] += self.prior_inv_sigma**2
+        info[2, 2] += floor_jac**2
         grad = flat @ res.ravel() + prior * self.prior_inv_sigma
+        grad[2] += floor * floor_jac
         return ObjectLinearization(cost, grad, info, outliers)
 
 

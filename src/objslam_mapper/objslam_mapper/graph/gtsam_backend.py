@@ -19,7 +19,9 @@ Graph (:func:`build_gtsam_graph`)
       ``BetweenFactorPose2``/``PriorFactorPose2`` would differ: this wheel's Pose2 chart
       is the exponential map, so their error is ``Logmap(u^-1 x_i^-1 x_j)``, another model.
       They are therefore custom factors too;
-    - the class priors as ``PriorFactorVector`` with diagonal sigmas (built-in, C++);
+    - the class priors as ``PriorFactorVector`` with diagonal sigmas (built-in, C++), and
+      a distractor's one-sided floor factor on its base height (:mod:`objslam_mapper.model.floor`)
+      as a one-row custom factor;
     - the slice factors (:mod:`slice_model`), with its analytic Jacobians composed with the
       Pose2 chart: a GTSAM tangent vector ``v`` of a pose moves it by
       ``(R(theta) v_xy, v_theta)`` in map coordinates at ``v = 0``; an outlier slice
@@ -78,6 +80,7 @@ from objslam_mapper.graph.solver import (
     make_solution,
     object_error_covariance,
 )
+from objslam_mapper.model.floor import floor_jacobian, floor_residual
 from objslam_mapper.model.outliers import truncate
 from objslam_mapper.model.slice_model import predict_reduced, whitened_slice_error
 
@@ -226,6 +229,20 @@ def _slice_factor(
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(4 * len(measurements)), [*pose_keys, object_key], error)
 
 
+def _floor_factor(object_key: int, floor_stddev_m: float) -> gtsam.CustomFactor:
+    """The one-sided floor factor on an object's base height (objslam_mapper.model.floor)."""
+    inv_sigma = 1.0 / floor_stddev_m
+
+    def error(_factor: gtsam.CustomFactor, values: gtsam.Values, jacobians: list | None) -> NDArray[np.float64]:
+        z_base = values.atVector(object_key)[2]
+        if jacobians is not None:
+            jacobians[0] = np.zeros((1, OBJECT_DIM))
+            jacobians[0][0, 2] = floor_jacobian(z_base, inv_sigma)
+        return np.atleast_1d(floor_residual(z_base, inv_sigma))
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(1), [object_key], error)
+
+
 def _odometry_factor(problem: GraphProblem, first: int, stop: int) -> gtsam.CustomFactor:
     """One CustomFactor over the odometry increments first..stop-1 (poses first..stop), rows 3k..3k+2 each.
 
@@ -330,6 +347,8 @@ def _build(
         row = int(layout.priors[j])
         sigmas = gtsam.noiseModel.Diagonal.Sigmas(problem.prior_stddev[row])
         graph.add(gtsam.PriorFactorVector(keys.object(j), np.array(problem.prior_mean[row]), sigmas))
+        if np.isfinite(problem.prior_floor_stddev[row]):
+            graph.add(_floor_factor(keys.object(j), float(problem.prior_floor_stddev[row])))
         if per_detection:
             chunks = np.split(group, np.arange(1, len(group)))
         else:

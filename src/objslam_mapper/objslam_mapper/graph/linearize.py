@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from objslam_common.geometry import wrap_angle
 from objslam_mapper.graph.layout import Layout, graph_log_normalizer
 from objslam_mapper.graph.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphProblem
+from objslam_mapper.model.floor import floor_jacobian, floor_residual
 from objslam_mapper.model.outliers import (
     COLD_START_CAP_SCALES,
     WARM_START_CAP_SCALES,
@@ -159,6 +160,7 @@ class AssociationSystem:
         self.prior_mean = problem.prior_mean[layout.priors]
         self.prior_inv_sigma = 1.0 / problem.prior_stddev[layout.priors]
         self.prior_spread = problem.prior_spread[layout.priors]
+        self.floor_inv_sigma = 1.0 / problem.prior_floor_stddev[layout.priors]  # 0: no floor factor
         self.log_normalizer = graph_log_normalizer(problem, layout)
         self.mounts = problem.mounts(layout.measurements)
 
@@ -284,7 +286,9 @@ class AssociationSystem:
         first[2] = wrap_angle(first[2])
         first /= self.problem.first_pose_stddev
         pr = (objects - self.prior_mean) * self.prior_inv_sigma
-        cost = odo_cost + 0.5 * float(np.sum(first**2) + np.sum(sl**2) + np.sum(pr**2))
+        z_base = objects[:, 2] if k else np.zeros(0)
+        floor, floor_jac = floor_residual(z_base, self.floor_inv_sigma), floor_jacobian(z_base, self.floor_inv_sigma)
+        cost = odo_cost + 0.5 * float(np.sum(first**2) + np.sum(sl**2) + np.sum(pr**2) + np.sum(floor**2))
         if self.n_calib:
             cost += calib_cost
 
@@ -299,7 +303,9 @@ class AssociationSystem:
         object_diag = np.add.reduceat(np.einsum("kim,kjm->ijm", jac_object, jac_object), lay.starts, axis=2)
         object_diag = np.ascontiguousarray(object_diag.transpose(2, 0, 1)) if k else np.zeros((0, 5, 5))
         object_diag[:, np.arange(OBJECT_DIM), np.arange(OBJECT_DIM)] += self.prior_inv_sigma**2
+        object_diag[:, 2, 2] += floor_jac**2
         grad_object = pr * self.prior_inv_sigma
+        grad_object[:, 2] += floor * floor_jac
         if k:
             grad_object += np.add.reduceat(np.einsum("kim,km->im", jac_object, sl), lay.starts, axis=1).T
         cross = np.einsum("kim,kjm->ijm", jac_pose, jac_object)

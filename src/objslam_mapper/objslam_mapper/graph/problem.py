@@ -30,7 +30,9 @@ sampler (:func:`objslam_mapper.graph.solver.solve`). It holds
   of a class (the sampler's static distractors). Beside each row's stddev, the spread of
   real instances about its mean (``prior_spread``), which the error covariance counts: the
   same but for a floor object's base height, whose prior is slack for the MAP (it stands
-  on the floor: ``solver.error_covariance.floor_z_base_spread_m``);
+  on the floor: ``solver.error_covariance.floor_z_base_spread_m``). An appended row may
+  also keep its thing's base above the floor (``prior_floor_stddev``,
+  :mod:`objslam_mapper.model.floor`); class rows need not, their base height is tight;
 - the log-normalizers ``-0.5 log|2 pi Sigma|`` of every Gaussian factor, for the evidence.
 
 Slices whose class is not in the catalog, and images outside the odometry span, are left
@@ -52,6 +54,7 @@ from objslam_common.mount import CameraMount, CameraMounts
 from objslam_common.records import ImageSlices, OdometrySample
 from objslam_mapper.config import GraphConfig, OdometryNoiseConfig, SliceNoiseConfig, SolverConfig
 from objslam_mapper.errors import MapperError
+from objslam_mapper.model.floor import NO_FLOOR, floor_log_mass
 from objslam_mapper.model.odometry import TrajectoryError, increment_stddev, odometry_increments, poses_at_stamps
 from objslam_mapper.model.outliers import inlier_log_weight, outlier_cost
 from objslam_mapper.model.slice_model import BEARING, ELEVATION_BOTTOM, ELEVATION_TOP, bounds_of_cuts
@@ -115,7 +118,9 @@ class GraphProblem:
     trajectory_log_normalizer: float  # odometry factors + first-pose prior + calibration prior
     measurement_log_normalizer: NDArray[np.float64]  # (M,) Gaussian normalizer + log(1 - outlier probability)
     measurement_outlier_cost: NDArray[np.float64]  # (M,) cap of a slice's half chi-square (inf: none)
-    prior_log_normalizer: NDArray[np.float64]  # (P,) per prior row
+    prior_log_normalizer: NDArray[np.float64]  # (P,) per prior row, its floor factor's renormalisation included
+    # (P,) stddev of the row's floor factor on z_base (objslam_mapper.model.floor; inf: none)
+    prior_floor_stddev: NDArray[np.float64]
     rejected_image_count: int = 0
     rejected_slice_count: int = 0
     # Per-measurement camera mounts relative to measurement_pose; None: ``mount`` for all
@@ -146,21 +151,33 @@ class GraphProblem:
 
 
 def with_extra_priors(
-    problem: GraphProblem, mean: NDArray[np.float64], stddev: NDArray[np.float64]
+    problem: GraphProblem, mean: NDArray[np.float64], stddev: NDArray[np.float64], floor_stddev_m: float = NO_FLOOR
 ) -> tuple[GraphProblem, int]:
-    """``problem`` with prior rows ``mean``, ``stddev`` (R, 5) appended, and the index of the first."""
+    """``problem`` with prior rows ``mean``, ``stddev`` (R, 5) appended, and the index of the first;
+    with a floor factor of stddev ``floor_stddev_m`` on their base height (default none)."""
     first = len(problem.prior_mean)
-    mean = np.concatenate([problem.prior_mean, np.asarray(mean, dtype=float).reshape(-1, OBJECT_DIM)])
+    extra_mean = np.asarray(mean, dtype=float).reshape(-1, OBJECT_DIM)
     extra = np.asarray(stddev, dtype=float).reshape(-1, OBJECT_DIM)
-    stddev = np.concatenate([problem.prior_stddev, extra])
+    extra_floor = np.full(len(extra), float(floor_stddev_m))
     extended = dataclasses.replace(
         problem,
-        prior_mean=read_only(mean),
-        prior_stddev=read_only(stddev),
+        prior_mean=read_only(np.concatenate([problem.prior_mean, extra_mean])),
+        prior_stddev=read_only(np.concatenate([problem.prior_stddev, extra])),
         prior_spread=read_only(np.concatenate([problem.prior_spread, extra])),
-        prior_log_normalizer=read_only(gaussian_log_normalizer(stddev)),
+        prior_log_normalizer=read_only(
+            np.concatenate([problem.prior_log_normalizer, prior_log_normalizer(extra_mean, extra, extra_floor)])
+        ),
+        prior_floor_stddev=read_only(np.concatenate([problem.prior_floor_stddev, extra_floor])),
     )
     return extended, first
+
+
+def prior_log_normalizer(
+    mean: NDArray[np.float64], stddev: NDArray[np.float64], floor_stddev_m: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(R,) log-normalizers of prior rows: Gaussian, less the log mass their floor factors leave."""
+    floor = [floor_log_mass(m[2], s[2], f) for m, s, f in zip(mean, stddev, floor_stddev_m, strict=True)]
+    return gaussian_log_normalizer(stddev) - np.array(floor, dtype=float)
 
 
 def class_measurement_stddev(cls: ObjectClass, noise: SliceNoiseConfig, mount: CameraMount) -> NDArray[np.float64]:
@@ -315,6 +332,7 @@ def build_problem(
             outlier_cost(gaussian_norm, noise.outlier_probability, noise.outlier_volume_rad4)
         ),
         prior_log_normalizer=read_only(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
+        prior_floor_stddev=read_only(np.full(len(classes), NO_FLOOR)),
         rejected_image_count=at.rejected_count,
         rejected_slice_count=rejected_slices,
         odometry_noise=config.odometry,

@@ -38,7 +38,10 @@ a static distractor (weight ``distractor_weight``)
     (a flat patch on the floor, several tracklets merged, then beat clutter). A real
     object's tracklet still prefers its class by the Occam factor of the tighter priors
     (several nats); a poster that would need ``z_base`` tens of prior standard deviations
-    off the floor prefers the distractor by hundreds.
+    off the floor prefers the distractor by hundreds. Broad as they are, those priors
+    would let a map of distractors alone grow about the camera with every base under the
+    floor; a one-sided floor factor (``distractor_floor_stddev_m``,
+    :mod:`objslam_mapper.model.floor`) keeps a distractor's base above it.
 
 The mixture of the two components is approximated by its larger term, chosen once per
 tracklet (:meth:`ClutterModel.component`): the component whose ``log L`` is larger with
@@ -80,6 +83,7 @@ from objslam_mapper.config import ClutterConfig
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem, with_extra_priors
 from objslam_mapper.graph.solver import GraphSolution
+from objslam_mapper.model.floor import NO_FLOOR
 
 INDEPENDENT = "independent"
 DISTRACTOR = "distractor"
@@ -136,7 +140,8 @@ class ClutterModel:
         self.config = config
         self._first_row: int | None = None
         if config.distractor_weight > 0.0:
-            problem, self._first_row = with_extra_priors(problem, *distractor_priors(problem, config))
+            floor = config.distractor_floor_stddev_m if config.distractor_floor_stddev_m > 0.0 else NO_FLOOR
+            problem, self._first_row = with_extra_priors(problem, *distractor_priors(problem, config), floor)
         self.problem = problem
 
     def distractor_row(self, measurement: int) -> int:
