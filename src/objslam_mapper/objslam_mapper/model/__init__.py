@@ -1,1 +1,1 @@
-"""The measurement model: what a slice and an odometry increment predict, and how far from it a measurement may be."""
+"""The measurement model: what a slice and an odometry increment predict, outliers, and the floor."""
