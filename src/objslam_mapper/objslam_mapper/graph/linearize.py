@@ -286,7 +286,7 @@ class AssociationSystem:
         first[2] = wrap_angle(first[2])
         first /= self.problem.first_pose_stddev
         pr = (objects - self.prior_mean) * self.prior_inv_sigma
-        z_base = objects[:, 2] if k else np.zeros(0)
+        z_base = objects[:, 2]  # objects is (K, 5), K = 0 included
         floor, floor_jac = floor_residual(z_base, self.floor_inv_sigma), floor_jacobian(z_base, self.floor_inv_sigma)
         cost = odo_cost + 0.5 * float(np.sum(first**2) + np.sum(sl**2) + np.sum(pr**2) + np.sum(floor**2))
         if self.n_calib:

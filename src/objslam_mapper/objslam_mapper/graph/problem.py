@@ -295,6 +295,7 @@ def build_problem(
     prior_stddev = np.array(
         [[c.xy_stddev_m, c.xy_stddev_m, c.z_base_stddev_m, c.diameter_stddev_m, c.height_stddev_m] for c in classes]
     )
+    class_floor = np.full(len(classes), NO_FLOOR)  # a class's base height prior is tight: no floor factor
     prior_spread = prior_stddev.copy()
     on_floor = np.array([c.on_floor for c in classes], dtype=bool)
     prior_spread[on_floor, 2] = config.solver.error_covariance.floor_z_base_spread_m
@@ -331,8 +332,10 @@ def build_problem(
         measurement_outlier_cost=read_only(
             outlier_cost(gaussian_norm, noise.outlier_probability, noise.outlier_volume_rad4)
         ),
-        prior_log_normalizer=read_only(gaussian_log_normalizer(prior_stddev.reshape(-1, OBJECT_DIM))),
-        prior_floor_stddev=read_only(np.full(len(classes), NO_FLOOR)),
+        prior_log_normalizer=read_only(
+            prior_log_normalizer(prior_mean.reshape(-1, OBJECT_DIM), prior_stddev.reshape(-1, OBJECT_DIM), class_floor)
+        ),
+        prior_floor_stddev=read_only(class_floor),
         rejected_image_count=at.rejected_count,
         rejected_slice_count=rejected_slices,
         odometry_noise=config.odometry,

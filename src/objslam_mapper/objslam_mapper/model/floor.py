@@ -10,7 +10,7 @@ floor is the scale it lacked: the map frame's ``z = 0`` is the floor the robot d
 a thing whose base is under it would be hidden there.
 
 The factor is a hinge on ``z_base``: residual ``r = min(z_base, 0) / s`` with ``s`` the
-floor stddev (``clutter.distractor_floor_stddev_m``): zero above the floor, a Gaussian wall
+floor stddev (``sampler.clutter.distractor_floor_stddev_m``): zero above the floor, a Gaussian wall
 below it, whose width allows the detector's lower-edge bias on a patch lying on the floor.
 Its Jacobian is ``1/s`` where it is active and 0 elsewhere, so Gauss-Newton and the Laplace
 evidence treat it as any other factor. The prior of a row with a floor factor is the
