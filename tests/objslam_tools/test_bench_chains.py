@@ -32,9 +32,16 @@ def test_one_and_two_chains_are_timed_side_by_side(repo_root, tmp_path):
     assert two["speedup"] == pytest.approx(2 * rows[1]["wall_s"] / two["wall_s"])
     assert two["converged"] in ([True], [False]) and two["objects"] == [5]
     assert result["chains"]["ray_start_s"] > 0.0
+    # The same two chains one after another: each timed alone, the wall time split into the
+    # slowest chain's own work and what running them in parallel adds.
+    assert len(two["alone_s"]) == 2 and two["slowest_alone_s"] == max(two["alone_s"])
+    assert two["slowest_alone_to_one"] == pytest.approx(two["slowest_alone_s"] / rows[1]["wall_s"])
+    assert two["wall_to_slowest_alone"] == pytest.approx(two["wall_s"] / two["slowest_alone_s"])
+    assert "alone_s" not in rows[1]
     # The table printed without --json, from the same figures (one bench run for both: they take seconds).
     table = format_table(result)
     assert "2 chains take" in table and "target <= 1.2x" in table and "Ray start" in table
+    assert "2 chains one after another" in table and "the slowest alone" in table
 
 
 @pytest.mark.parametrize(("args", "message"), [(("--chains", "0,2"), "at least 1"), (("--chains", "x"), "1,2,4")])

@@ -11,6 +11,12 @@ excluded), its ratio to one chain's, the chains' own seconds summed (their CPU: 
 single-threaded), the speedup (chains per wall second against one chain's), and whether
 the chains converged. Target: 2 chains on 2 cores take at most 1.2x one chain's wall time.
 
+That ratio has two factors, which ``--alone`` (on by default) tells apart: the same chains
+are also run one after another in this process, so each is timed alone. The slowest one's
+ratio to one chain is the work its start adds (a chain from singletons walks to the mode
+through states no other chain solves); the wall time over it is what running in parallel
+costs (Ray, two processes on two cores).
+
 Batch (``--batch``): the five scenarios (rendered into ``--bags-dir`` when not bundled) mapped
 by ``objslam map`` one after another in one process each (``parallel.backend: inprocess``:
 detector, then the chains one by one), against ``objslam map-batch`` of all five as one
@@ -44,6 +50,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--burn-in", type=int, default=2500, help="burn-in samples (default 2500)")
     parser.add_argument("--repeats", type=int, default=1, help="builds per chain count; the median is shown")
     parser.add_argument("--workers", type=int, default=2, help="CPUs of the local Ray (default 2)")
+    parser.add_argument(
+        "--alone",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run each count's chains one after another in this process, timing each chain alone",
+    )
     parser.add_argument(
         "--batch",
         action=argparse.BooleanOptionalAction,
@@ -92,46 +104,61 @@ def _time_builds(args: argparse.Namespace, counts: list[int]) -> dict[str, Any]:
         ray.ray()
     ray_start_s = time.perf_counter() - started
     runs: dict[int, list[dict[str, Any]]] = {k: [] for k in counts}
+
+    def build(k: int, runner: Any) -> tuple[float, Any]:
+        sampler = dataclasses.replace(config.sampler, chains=k)
+        wall = time.perf_counter()
+        built = build_map(odometry, images, dataclasses.replace(config, sampler=sampler), catalog, None, runner)
+        return time.perf_counter() - wall, built
+
     try:
         for repeat in range(args.repeats):
             for k in counts:
                 print(f"chains {k}, run {repeat + 1}/{args.repeats}...", file=sys.stderr, flush=True)
-                sampler = dataclasses.replace(config.sampler, chains=k)
-                runner = InProcess() if k == 1 else ray
-                wall = time.perf_counter()
-                built = build_map(odometry, images, dataclasses.replace(config, sampler=sampler), catalog, None, runner)
-                wall = time.perf_counter() - wall
+                wall, built = build(k, InProcess() if k == 1 else ray)
                 convergence = built.diagnostics.get("convergence") or {}
-                runs[k].append(
-                    {
-                        "wall_s": wall,
-                        "chain_s": built.diagnostics["timings_s"]["chains"],
-                        "converged": convergence.get("converged"),
-                        "rhat_max": convergence.get("rhat_max"),
-                        "objects": len(built.objects),
-                    }
-                )
+                run = {
+                    "wall_s": wall,
+                    "chain_s": built.diagnostics["timings_s"]["chains"],
+                    "converged": convergence.get("converged"),
+                    "rhat_max": convergence.get("rhat_max"),
+                    "objects": len(built.objects),
+                }
+                if args.alone and k > 1:
+                    print(f"chains {k} one after another, run {repeat + 1}/{args.repeats}...", file=sys.stderr)
+                    _, alone = build(k, InProcess())
+                    run["alone_s"] = alone.diagnostics["timings_s"]["chain_seconds"]
+                runs[k].append(run)
     finally:
         ray.close()
-    rows = []
-    for k in counts:
-        wall = statistics.median(r["wall_s"] for r in runs[k])
-        rows.append(
-            {
-                "chains": k,
-                "wall_s": wall,
-                "wall_s_all": [round(r["wall_s"], 2) for r in runs[k]],
-                "chain_s": statistics.median(r["chain_s"] for r in runs[k]),
-                "converged": [r["converged"] for r in runs[k]],
-                "rhat_max": [r["rhat_max"] for r in runs[k]],
-                "objects": [r["objects"] for r in runs[k]],
-            }
-        )
+    rows = [_row(k, runs[k]) for k in counts]
     one = next((r["wall_s"] for r in rows if r["chains"] == 1), None)
     for row in rows:
         row["ratio_to_one"] = row["wall_s"] / one if one else None
         row["speedup"] = row["chains"] * one / row["wall_s"] if one else None
+        slowest = row.get("slowest_alone_s")
+        row["slowest_alone_to_one"] = slowest / one if one and slowest else None
+        row["wall_to_slowest_alone"] = row["wall_s"] / slowest if slowest else None
     return {"bag": args.bag, "frames": len(images), "ray_start_s": ray_start_s, "rows": rows}
+
+
+def _row(k: int, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """One chain count's medians over its runs."""
+    row: dict[str, Any] = {
+        "chains": k,
+        "wall_s": statistics.median(r["wall_s"] for r in runs),
+        "wall_s_all": [round(r["wall_s"], 2) for r in runs],
+        "chain_s": statistics.median(r["chain_s"] for r in runs),
+        "converged": [r["converged"] for r in runs],
+        "rhat_max": [r["rhat_max"] for r in runs],
+        "objects": [r["objects"] for r in runs],
+    }
+    alone = [r["alone_s"] for r in runs if "alone_s" in r]
+    if alone:
+        # Per chain the median over the runs: a chain does the same work in every run.
+        row["alone_s"] = [round(statistics.median(column), 2) for column in zip(*alone, strict=True)]
+        row["slowest_alone_s"] = max(row["alone_s"])
+    return row
 
 
 def _batch(args: argparse.Namespace) -> dict[str, Any]:
@@ -244,6 +271,13 @@ def format_table(r: dict[str, Any]) -> str:
             f"  {row['chains']:>6} {row['wall_s']:>8.1f} {ratio} {row['chain_s']:>8.1f} {speedup}  {verdicts:<11} "
             f"{','.join(map(str, row['objects'])):<8} {row['wall_s_all']}"
         )
+    for row in chains["rows"]:
+        if row.get("slowest_alone_to_one"):
+            lines.append(
+                f"  {row['chains']} chains one after another in this process: {row['alone_s']} s; the slowest alone "
+                f"takes {row['slowest_alone_to_one']:.2f}x one chain (its start's work), the parallel wall time "
+                f"{row['wall_to_slowest_alone']:.2f}x the slowest alone (running in parallel)"
+            )
     two = next((row for row in chains["rows"] if row["chains"] == 2 and row["ratio_to_one"]), None)
     if two is not None:
         lines.append(
