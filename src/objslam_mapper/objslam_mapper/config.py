@@ -432,6 +432,15 @@ class MoveConfig:
     gather: float = setting(
         0.05, "probability of making a new object of two or more clutter tracklets of one class", minimum=0.0
     )
+    dissolve_pair: float = setting(
+        0.05,
+        "probability of moving every tracklet of two objects of one class to the clutter set (one thing held as "
+        "two objects)",
+        minimum=0.0,
+    )
+    gather_pair: float = setting(
+        0.05, "probability of making two new objects of clutter tracklets of one class", minimum=0.0
+    )
     distance_scale_m: float = setting(
         1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
     )
@@ -457,6 +466,8 @@ class MoveConfig:
             raise ValueError("to_clutter and from_clutter are each other's reverse: both or neither must be > 0")
         if (self.dissolve > 0.0) != (self.gather > 0.0):
             raise ValueError("dissolve and gather are each other's reverse: both or neither must be > 0")
+        if (self.dissolve_pair > 0.0) != (self.gather_pair > 0.0):
+            raise ValueError("dissolve_pair and gather_pair are each other's reverse: both or neither must be > 0")
 
 
 @dataclass(frozen=True)

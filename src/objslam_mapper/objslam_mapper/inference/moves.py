@@ -10,7 +10,10 @@ come in reverse pairs so every proposal has an exact Hastings ratio:
 - ``dissolve`` an object of two or more tracklets into clutter  <->  ``gather`` two or more
   clutter tracklets of one class into a new object: half the time (when the target says which
   clutter tracklets are one thing, :meth:`.target.AssociationTarget.clutter_things`) exactly
-  the tracklets of one such thing, else a seed and others drawn by closeness.
+  the tracklets of one such thing, else a seed and others drawn by closeness,
+- ``dissolve_pair``: two objects of one class (drawn as a merge draws them) into clutter
+  <->  ``gather_pair``: clutter tracklets gathered as a gather does, split in two new objects
+  as a split does.
 
 The last pair moves a group at once, which single moves cannot do when the missed-detection
 term stands between: an object that is a poster seen in five tracklets loses hits (so pays
@@ -24,6 +27,12 @@ distractor's broad priors, a few nats, so the chain must cross between them ofte
 drawn by closeness rarely picks exactly a thing's tracklets among a dozen clutter tracklets
 of its class nearby, and on ``clutter`` (seed 1) two chains held two real objects as
 distractors for 6000 steps, 8 to 9 nats below the states with them as objects.
+
+The pair moves take a thing held as two objects: on ``office`` seed 13, two chains (from
+singletons and greedy) held a poster seen in two tracklets 1.1 m apart as two objects,
+408 nats below the other chains' state with both tracklets one distractor, for 6000
+steps: either tracklet alone to clutter cost 34 or 218 nats, and merging the two objects
+first (then dissolving them) 158.
 
 The move kind is drawn among the kinds possible in the current state (nothing to split,
 no clutter...) in proportion to configured weights, so P(m | J) depends on J. With a move m
@@ -63,7 +72,17 @@ from objslam_mapper.config import MoveConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
 
-MOVE_KINDS = ("merge", "split", "reassign", "to_clutter", "from_clutter", "dissolve", "gather")
+MOVE_KINDS = (
+    "merge",
+    "split",
+    "reassign",
+    "to_clutter",
+    "from_clutter",
+    "dissolve",
+    "gather",
+    "dissolve_pair",
+    "gather_pair",
+)
 REVERSE_MOVE = {
     "merge": "split",
     "split": "merge",
@@ -72,7 +91,10 @@ REVERSE_MOVE = {
     "from_clutter": "to_clutter",
     "dissolve": "gather",
     "gather": "dissolve",
+    "dissolve_pair": "gather_pair",
+    "gather_pair": "dissolve_pair",
 }
+CLUTTER_MOVES = ("to_clutter", "from_clutter", "dissolve", "gather", "dissolve_pair", "gather_pair")
 _NEW = -2  # destination key: a new object
 THING_GATHER_SHARE = 0.5  # of gathers: exactly one clutter thing's tracklets (module docstring)
 _CACHE_SIZE = 20_000  # per-state proposal weights kept
@@ -180,7 +202,7 @@ class Proposals:
         self.allow_clutter = allow_clutter
         probs = {kind: float(getattr(self.moves, kind)) for kind in MOVE_KINDS}
         if not allow_clutter:
-            probs["to_clutter"] = probs["from_clutter"] = probs["dissolve"] = probs["gather"] = 0.0
+            probs.update(dict.fromkeys(CLUTTER_MOVES, 0.0))
         self.kind_weights = {k: p for k, p in probs.items() if p > 0.0}
         self._inv_two_scale2 = 0.5 / self.moves.distance_scale_m**2
         self._views: OrderedDict[Association, StateView] = OrderedDict()
@@ -235,6 +257,8 @@ class Proposals:
                 "from_clutter": len(view.state.clutter) > 0,
                 "dissolve": len(self._shared_objects(view)) > 0,
                 "gather": len(self._gather_seeds(view)) > 0,
+                "dissolve_pair": len(self._merges(view)) > 0,
+                "gather_pair": len(self._gather_seeds(view)) > 0,
             }
             kinds = [k for k in self.kind_weights if possible[k]]
             view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
@@ -338,9 +362,9 @@ class Proposals:
         log_r = self._kinds(new).log_prob("split") - math.log(n_splittable) + self._log_bipartition(merged, side_p)
         return Proposal("merge", new, log_f, log_r)
 
-    def _propose_split(self, view: StateView, rng: np.random.Generator) -> Proposal:
-        splittable = self._shared_objects(view)
-        members = view.groups[splittable[int(rng.integers(len(splittable)))]]
+    def _draw_bipartition(self, members: Sequence[int], rng: np.random.Generator) -> NDArray[np.bool_]:
+        """Two seeds drawn among ``members``, every other member sent to the nearer one's side
+        (:meth:`_seed_side_probs`): which members are on the first seed's side."""
         n = len(members)
         a = int(rng.integers(n))
         b = int(rng.integers(n - 1))
@@ -349,15 +373,28 @@ class Proposals:
         p_a = self._seed_side_probs(xy, ((xy - xy[a]) ** 2).sum(-1), ((xy - xy[b]) ** 2).sum(-1))
         side_p = rng.random(n) < p_a
         side_p[a], side_p[b] = True, False
+        return side_p
+
+    @staticmethod
+    def _pair_of(new: StateView, members: Sequence[int], side_p: NDArray[np.bool_]) -> tuple[int, int]:
+        """The two objects of ``new`` that hold the two sides of ``members``."""
+        first = int(np.flatnonzero(side_p)[0])
+        second = int(np.flatnonzero(~side_p)[0])
+        i, j = sorted((new.assignment[members[first]], new.assignment[members[second]]))
+        return i, j
+
+    def _propose_split(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        splittable = self._shared_objects(view)
+        members = view.groups[splittable[int(rng.integers(len(splittable)))]]
+        side_p = self._draw_bipartition(members, rng)
         assignment = list(view.assignment)
         for t, on_p in zip(members, side_p, strict=True):
             if not on_p:
                 assignment[t] = len(view.groups)
         new = self._view_of(assignment)
-        pair = tuple(sorted((new.assignment[members[a]], new.assignment[members[b]])))
         log_f = self._kinds(view).log_prob("split") - math.log(len(splittable))
         log_f += self._log_bipartition(members, side_p)
-        log_r = self._kinds(new).log_prob("merge") + self._merges(new).log_prob(pair)
+        log_r = self._kinds(new).log_prob("merge") + self._merges(new).log_prob(self._pair_of(new, members, side_p))
         return Proposal("split", new, log_f, log_r)
 
     def _move_tracklet(self, view: StateView, t: int, rng: np.random.Generator) -> tuple[StateView, int]:
@@ -471,17 +508,20 @@ class Proposals:
         log_r = self._kinds(new).log_prob("gather") + self._log_gather(new, members)
         return Proposal("dissolve", new, log_f, log_r)
 
-    def _propose_gather(self, view: StateView, rng: np.random.Generator) -> Proposal:
+    def _draw_gather(self, view: StateView, rng: np.random.Generator) -> list[int]:
+        """Clutter tracklets of one class to gather: a whole thing, or a seed and others by closeness."""
         things = self._things(view)
         if things and rng.random() < THING_GATHER_SHARE:
-            members = list(things[int(rng.integers(len(things)))])
-        else:
-            seeds = self._gather_seeds(view)
-            a = seeds[int(rng.integers(len(seeds)))]
-            others, second, joins = self._gather_parts(view, a)
-            b = second.draw(rng)
-            drawn = rng.random(len(others)) < joins
-            members = sorted({a, b} | {t for t, on in zip(others, drawn, strict=True) if on})
+            return list(things[int(rng.integers(len(things)))])
+        seeds = self._gather_seeds(view)
+        a = seeds[int(rng.integers(len(seeds)))]
+        others, second, joins = self._gather_parts(view, a)
+        b = second.draw(rng)
+        drawn = rng.random(len(others)) < joins
+        return sorted({a, b} | {t for t, on in zip(others, drawn, strict=True) if on})
+
+    def _propose_gather(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        members = self._draw_gather(view, rng)
         assignment = list(view.assignment)
         for t in members:
             assignment[t] = len(view.groups)
@@ -489,6 +529,29 @@ class Proposals:
         log_f = self._kinds(view).log_prob("gather") + self._log_gather(view, members)
         log_r = self._kinds(new).log_prob("dissolve") - math.log(len(self._shared_objects(new)))
         return Proposal("gather", new, log_f, log_r)
+
+    def _propose_dissolve_pair(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        merges = self._merges(view)
+        i, j = merges.draw(rng)
+        members = sorted(view.groups[i] + view.groups[j])
+        new = self._view_of([CLUTTER if a in (i, j) else a for a in view.assignment])
+        side_p = np.array([view.assignment[t] == i for t in members])
+        log_f = self._kinds(view).log_prob("dissolve_pair") + merges.log_prob((i, j))
+        log_r = self._kinds(new).log_prob("gather_pair") + self._log_gather(new, members)
+        log_r += self._log_bipartition(members, side_p)
+        return Proposal("dissolve_pair", new, log_f, log_r)
+
+    def _propose_gather_pair(self, view: StateView, rng: np.random.Generator) -> Proposal:
+        members = self._draw_gather(view, rng)
+        side_p = self._draw_bipartition(members, rng)
+        assignment = list(view.assignment)
+        for t, on_p in zip(members, side_p, strict=True):
+            assignment[t] = len(view.groups) + int(not on_p)
+        new = self._view_of(assignment)
+        log_f = self._kinds(view).log_prob("gather_pair") + self._log_gather(view, members)
+        log_f += self._log_bipartition(members, side_p)
+        log_r = self._kinds(new).log_prob("dissolve_pair") + self._merges(new).log_prob(self._pair_of(new, members, side_p))
+        return Proposal("gather_pair", new, log_f, log_r)
 
     def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
         """A proposal from ``view``'s state, or None when no move is possible there."""
