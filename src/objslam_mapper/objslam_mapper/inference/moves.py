@@ -550,7 +550,8 @@ class Proposals:
         new = self._view_of(assignment)
         log_f = self._kinds(view).log_prob("gather_pair") + self._log_gather(view, members)
         log_f += self._log_bipartition(members, side_p)
-        log_r = self._kinds(new).log_prob("dissolve_pair") + self._merges(new).log_prob(self._pair_of(new, members, side_p))
+        pair = self._pair_of(new, members, side_p)
+        log_r = self._kinds(new).log_prob("dissolve_pair") + self._merges(new).log_prob(pair)
         return Proposal("gather_pair", new, log_f, log_r)
 
     def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
