@@ -170,3 +170,29 @@ def test_one_chain_has_no_verdict():
     outcomes = [_Outcome([A, B] * 50, [10.0, 9.0] * 50)]
     got = chain_convergence(outcomes, _yields(outcomes, {"a": frozenset({0}), "b": frozenset()}), [0], 1.01)
     assert got.converged is None and got.rhat_max is None and got.existence_by_chain[0] == (0.5,)
+
+
+def test_chains_that_switch_rarely_say_how_many_draws_they_need():
+    """Every chain visits both states, but in long runs: short of draws, not stuck."""
+    runs = ([A] * 90 + [B] * 60 + [A] * 50, [B] * 70 + [A] * 130, [A] * 120 + [B] * 80)
+    outcomes = [_Outcome(trace, [10.0 if s is A else 9.0 for s in trace]) for trace in runs]
+    got = chain_convergence(outcomes, _yields(outcomes, {"a": frozenset({0}), "b": frozenset({0})}), [0], 1.01)
+    assert got.converged is False and 0.0 < got.ess_min < 300.0
+    # ESS grows with the draws: 200 draws per chain gave ess_min over 3 chains, 100 per chain wanted.
+    assert got.draws_needed == pytest.approx(200 * 300 / got.ess_min, rel=0.05)
+    assert got.draws_needed > 200
+    assert any(f"about {got.draws_needed} kept draws per chain" in d for d in got.disagreements)
+    assert got.to_dict()["draws_needed"] == got.draws_needed
+
+
+def test_no_count_of_draws_is_promised_to_chains_that_hold_apart_states():
+    stuck = [_Outcome([A] * 200, [10.0] * 200), _Outcome([A] * 200, [10.0] * 200), _Outcome([B] * 200, [9.0] * 200)]
+    got = chain_convergence(stuck, _yields(stuck, {"a": frozenset({0}), "b": frozenset({0, 1})}), [0, 1], 1.01)
+    assert got.converged is False and got.draws_needed is None
+    rng = np.random.default_rng(1)
+    mixed = [
+        _Outcome(t, [10.0 if s is A else 9.0 for s in t])
+        for t in ([A if x else B for x in rng.random(400) < 0.7] for _ in range(3))
+    ]
+    got = chain_convergence(mixed, _yields(mixed, {"a": frozenset({0}), "b": frozenset({0, 1})}), [0, 1], 1.01)
+    assert got.converged and got.draws_needed is None

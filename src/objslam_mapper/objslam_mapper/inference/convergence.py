@@ -8,6 +8,13 @@ computed per chain. The chains agree (``converged``) when every R-hat is at most
 ``sampler.rhat_max`` (1.01 by default) and every reported identity is on the same side of
 1/2 in every chain, i.e. each chain alone would have put the same identities in the map.
 
+Chains that visit the same states, but switch between them too rarely, are short of draws,
+not stuck: ``draws_needed`` then says how many kept draws per chain would give every
+quantity a bulk ESS of 100 per chain (Vehtari et al. 2021 trust R-hat from there), the ESS
+growing in proportion to the draws at the mixing seen. Where a chain holds a state no other
+chain visits (an identity on the other side of 1/2, or an R-hat that is infinite) more draws
+of the same chains need not meet, and it is None.
+
 A quantity that is the same constant in every draw of every chain has no R-hat in ArviZ
 (0/0); the chains agree on it exactly, so it counts as 1. One that is constant within each
 chain but not across them (each chain stuck in its own state) has infinite R-hat, and an
@@ -30,6 +37,7 @@ from objslam_mapper.inference.chains import ChainOutcome
 
 LOG_TARGET = "log_target"
 OBJECTS = "objects"
+ESS_PER_CHAIN = 100  # bulk ESS per chain before R-hat is trusted (Vehtari et al. 2021, section 4)
 
 
 def identity_name(map_id: int) -> str:
@@ -54,6 +62,7 @@ class Convergence:
     ess_min: float | None = None
     converged: bool | None = None  # None: one chain
     disagreements: tuple[str, ...] = ()  # why not, one line each
+    draws_needed: int | None = None  # kept draws per chain for ESS_PER_CHAIN (module docstring)
 
     def spread(self, map_id: int) -> float:
         """Largest minus smallest per-chain existence probability of an identity."""
@@ -68,6 +77,7 @@ class Convergence:
             "rhat_max": _plain(self.rhat_max),
             "ess_bulk_min": _plain(self.ess_min),
             "disagreements": list(self.disagreements),
+            "draws_needed": self.draws_needed,
             "quantities": {
                 name: {"rhat": _plain(q.rhat), "ess_bulk": _plain(q.ess_bulk)} for name, q in self.quantities.items()
             },
@@ -154,17 +164,37 @@ def chain_convergence(
     disagreements = [
         f"R-hat of {name} is {q.rhat:.3f} (at most {rhat_max})" for name, q in quantities.items() if q.rhat > rhat_max
     ]
+    split = False
     for i, values in by_chain.items():
         if len({p > 0.5 for p in values}) > 1:
+            split = True
             shown = ", ".join(f"{p:.2f}" for p in values)
             disagreements.append(f"identity {i} is in the map of some chains and not of others (P by chain: {shown})")
+    rhat_worst = max(q.rhat for q in quantities.values())
+    ess_min = min(q.ess_bulk for q in quantities.values())
+    needed = None
+    if disagreements and not split and math.isfinite(rhat_worst) and 0.0 < ess_min < ESS_PER_CHAIN * chains:
+        needed = draws_needed(draws, chains, ess_min)
+        disagreements.append(
+            f"the chains visit the same states but switch between them rarely: about {needed} kept draws per "
+            f"chain would give a bulk ESS of {ESS_PER_CHAIN} per chain (now {ess_min / chains:.0f})"
+        )
     return Convergence(
         chains,
         draws,
         quantities,
         by_chain,
-        rhat_max=max(q.rhat for q in quantities.values()),
-        ess_min=min(q.ess_bulk for q in quantities.values()),
+        rhat_max=rhat_worst,
+        ess_min=ess_min,
         converged=not disagreements,
         disagreements=tuple(disagreements),
+        draws_needed=needed,
     )
+
+
+def draws_needed(draws: int, chains: int, ess_min: float) -> int:
+    """Kept draws per chain for a bulk ESS of ``ESS_PER_CHAIN`` per chain, the ESS growing in
+    proportion to the draws; rounded up to two significant digits."""
+    raw = draws * ESS_PER_CHAIN * chains / ess_min
+    step = 10 ** max(0, math.floor(math.log10(raw)) - 1)
+    return int(math.ceil(raw / step) * step)
