@@ -401,6 +401,17 @@ class DetectionConfig:
         "(bearing x elevation, below the top of the view)",
         minimum=0.0,
     )
+    occluded_edges: bool = setting(
+        True,
+        "a slice edge on the silhouette of a nearer thing of another class or a table (in the heuristic start's "
+        "map) is a bound on the object's edge, as a view edge is (docs/method.md)",
+    )
+    occluded_edge_margin_rad: float = setting(
+        0.02,
+        "a slice edge within this angle of a nearer thing's silhouette counts as on it (rad)",
+        minimum=0.0,
+        expert=True,
+    )
     table_diameter_m: float = setting(
         0.45,
         "objects of a class whose base is above the floor stand on a table this wide (m; docs/design.md), as "

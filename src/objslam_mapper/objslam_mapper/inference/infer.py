@@ -32,6 +32,7 @@ from objslam_mapper.inference.diagnostics import (
     timings,
     work_diagnostics,
 )
+from objslam_mapper.inference.occluded import with_occluded_edges
 from objslam_mapper.inference.target import AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import TrackletResult, tracklets_of_problem
 from objslam_mapper.map_file import BuiltMap
@@ -76,6 +77,8 @@ def prepare(problem: GraphProblem, config: SamplerConfig, progress: PhaseProgres
     watch = Stopwatch(progress)
     watch.report("tracklets", 0, 1)
     chained = tracklets_of_problem(problem, config.tracklets)
+    if config.detection.occluded_edges and chained.tracklets:
+        problem = with_occluded_edges(problem, chained, config)
     watch.report("tracklets", 1, 1)
     watch.lap("tracklets")
     tasks = (

@@ -253,6 +253,17 @@ class AssociationTarget:
             dtype=bool,
         )
 
+    def objects_at_map(self, state: Association) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray, NDArray]:
+        """``state``'s poses (N, 3) and objects at its MAP (distractors left out): (K, 5) (x, y,
+        z_base, diameter, height), (K,) class rows, (K,) whether each stands on a table."""
+        solution = self.solution(state)
+        groups = self.graph_groups(state)
+        keep = [k for k, g in enumerate(groups) if g[0] == OBJECT]
+        members = [self.measurements(groups[k]) for k in keep]
+        labels = np.array([int(self.problem.measurement_label[m[0]]) for m in members], dtype=np.int64)
+        on_table = self.on_table([groups[k] for k in keep], members)
+        return solution.map_T_base, estimates(solution)[keep].reshape(-1, 5), labels, on_table
+
     def kin(self, groups: Sequence[GraphGroup]) -> NDArray[np.int64]:
         """Which of ``groups`` share their hits and misses in the detection term
         (objslam_mapper.inference.detection.share): a distractor unlike any object of its

@@ -237,6 +237,21 @@ def bounds_of_cuts(cut_edges: ArrayLike, top_at_view_top: ArrayLike) -> NDArray[
     return bounds
 
 
+def with_side_cuts(bounds: NDArray[np.integer], cut_edges: ArrayLike) -> NDArray[np.int8]:
+    """``bounds`` (M, 4) of :func:`bounds_of_cuts` with more edges cut at the sides
+    (``CUT_LEFT``/``CUT_RIGHT`` bits, e.g. by a nearer thing): the bearing and width as
+    :func:`bounds_of_cuts` makes them from the union of the old and new cuts."""
+    bounds = np.array(bounds, dtype=np.int8).reshape(-1, 4)
+    cuts = np.asarray(cut_edges, dtype=np.int64).reshape(-1)
+    bearing = bounds[:, BEARING]
+    left = ((cuts & CUT_LEFT) != 0) | (bearing == LOWER_BOUND) | (bearing == UNMEASURED)
+    right = ((cuts & CUT_RIGHT) != 0) | (bearing == UPPER_BOUND) | (bearing == UNMEASURED)
+    sides = np.where(left, CUT_LEFT, 0) | np.where(right, CUT_RIGHT, 0)
+    recut = bounds_of_cuts(sides, np.zeros(len(cuts), dtype=bool))
+    bounds[:, BEARING], bounds[:, WIDTH] = recut[:, BEARING], recut[:, WIDTH]
+    return bounds
+
+
 def censor(error: NDArray[np.float64], bounds: NDArray[np.integer]) -> NDArray[np.float64]:
     """(4, A) 1 where a slice component counts, 0 where it does not.
 
