@@ -24,7 +24,7 @@ from objslam_mapper.model.slice_model import (
     with_side_cuts,
 )
 
-CONFIG = DetectionConfig()
+CONFIG = DetectionConfig(occluded_edge_margin_rad=0.02)
 MOUNT = CameraMount()
 GREEN, CYAN = 0, 1
 # Class rows: (x, y, z_base, diameter, height); only the diameter is read (range from width).
@@ -72,7 +72,6 @@ def _cuts(slices, labels, things, thing_labels, on_table):
         np.asarray(thing_labels),
         np.asarray(on_table),
         CONFIG,
-        margin_rad=0.02,
     )
 
 

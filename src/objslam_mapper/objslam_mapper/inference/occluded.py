@@ -33,6 +33,7 @@ from objslam_common.geometry import wrap_angle
 from objslam_common.records import CUT_LEFT, CUT_RIGHT
 from objslam_mapper.config import DetectionConfig, SamplerConfig
 from objslam_mapper.graph.problem import GraphProblem, read_only
+from objslam_mapper.inference.chains import ChainSpec
 from objslam_mapper.inference.detection import EVERYWHERE, Sight, sight, table_sight
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.screen import ProposalScreen
@@ -48,12 +49,11 @@ def with_occluded_edges(problem: GraphProblem, chained: TrackletResult, config: 
     """``problem`` with the slice edges that nearer things cut as bounds (module docstring),
     judged at the MAP of the heuristic start's association."""
     target = AssociationTarget(problem, chained.tracklets, TargetOptions.of(config), Work())
-    rng = np.random.default_rng(np.random.SeedSequence(config.seed, spawn_key=(0, 1)))
-    start = dispersed_start("heuristic", ProposalScreen(target), config, rng)
-    map_T_base, things, labels, on_table = target.objects_at_map(start.state)
-    cuts = occluded_edges(
-        problem, map_T_base, things, labels, on_table, config.detection, config.detection.occluded_edge_margin_rad
+    start = dispersed_start(
+        "heuristic", ProposalScreen(target), config, ChainSpec(0, "heuristic", config.seed).start_rng()
     )
+    map_T_base, things, labels, on_table = target.objects_at_map(start.state)
+    cuts = occluded_edges(problem, map_T_base, things, labels, on_table, config.detection)
     if not cuts.any():
         return problem
     logger.info("%d slices have an edge on a nearer thing's silhouette: those edges are bounds", int((cuts > 0).sum()))
@@ -68,10 +68,9 @@ def occluded_edges(
     thing_labels: NDArray[np.int64],
     on_table: NDArray[np.bool_],
     config: DetectionConfig,
-    margin_rad: float,
 ) -> NDArray[np.int64]:
-    """(M,) ``CUT_LEFT``/``CUT_RIGHT`` bits of the slice edges that lie within ``margin_rad`` of
-    the silhouette of a nearer thing (module docstring). ``things`` (K, 5) are (x, y, z_base,
+    """(M,) ``CUT_LEFT``/``CUT_RIGHT`` bits of the slice edges that lie within
+    ``config.occluded_edge_margin_rad`` of the silhouette of a nearer thing (module docstring). ``things`` (K, 5) are (x, y, z_base,
     diameter, height) of the reference map's objects, ``thing_labels`` (K,) their class rows,
     ``on_table`` (K,) which stand on a table."""
     cuts = np.zeros(problem.measurement_count, dtype=np.int64)
@@ -107,7 +106,7 @@ def occluded_edges(
         & (both.bottom[pose] < z[:, ELEVATION_TOP, None])
         & (both.top[pose] > z[:, ELEVATION_BOTTOM, None])
     )
-    reach = 0.5 * both.width[pose] + margin_rad
+    reach = 0.5 * both.width[pose] + config.occluded_edge_margin_rad
     for bit, edge in ((CUT_LEFT, bearing + 0.5 * width), (CUT_RIGHT, bearing - 0.5 * width)):
         on_silhouette = np.abs(wrap_angle(edge[:, None] - both.bearing[pose])) <= reach
         cuts |= np.where((occluder & on_silhouette).any(axis=1), bit, 0)
