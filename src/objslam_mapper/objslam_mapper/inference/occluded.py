@@ -70,9 +70,9 @@ def occluded_edges(
     config: DetectionConfig,
 ) -> NDArray[np.int64]:
     """(M,) ``CUT_LEFT``/``CUT_RIGHT`` bits of the slice edges that lie within
-    ``config.occluded_edge_margin_rad`` of the silhouette of a nearer thing (module docstring). ``things`` (K, 5) are (x, y, z_base,
-    diameter, height) of the reference map's objects, ``thing_labels`` (K,) their class rows,
-    ``on_table`` (K,) which stand on a table."""
+    ``config.occluded_edge_margin_rad`` of the silhouette of a nearer thing (module
+    docstring). ``things`` (K, 5) are (x, y, z_base, diameter, height) of the reference map's
+    objects, ``thing_labels`` (K,) their class rows, ``on_table`` (K,) which stand on a table."""
     cuts = np.zeros(problem.measurement_count, dtype=np.int64)
     things = np.asarray(things, dtype=float).reshape(-1, 5)
     if not len(things) or not problem.measurement_count:
