@@ -130,3 +130,7 @@ def test_side_cuts_equal_the_detectors_cuts(cut):
     assert np.array_equal(
         with_side_cuts(bounds_of_cuts(np.zeros(1), np.zeros(1, bool)), cuts), bounds_of_cuts(cuts, np.zeros(1, bool))
     )
+
+
+def test_a_map_without_objects_cuts_nothing():
+    assert _cuts([_slice_of(GREEN_BEHIND)], [GREEN], np.zeros((0, 5)), [], []).tolist() == [0]

@@ -256,8 +256,11 @@ class AssociationTarget:
     def objects_at_map(self, state: Association) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray, NDArray]:
         """``state``'s poses (N, 3) and objects at its MAP (distractors left out): (K, 5) (x, y,
         z_base, diameter, height), (K,) class rows, (K,) whether each stands on a table."""
-        solution = self.solution(state)
         groups = self.graph_groups(state)
+        if not groups:
+            empty = np.zeros(0)
+            return np.array(self.problem.odometry_poses), np.zeros((0, 5)), empty.astype(np.int64), empty.astype(bool)
+        solution = self.solution(state)
         keep = [k for k, g in enumerate(groups) if g[0] == OBJECT]
         members = [self.measurements(groups[k]) for k in keep]
         labels = np.array([int(self.problem.measurement_label[m[0]]) for m in members], dtype=np.int64)
