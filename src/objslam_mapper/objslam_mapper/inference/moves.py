@@ -15,7 +15,7 @@ come in reverse pairs so every proposal has an exact Hastings ratio:
   <->  ``gather_pair``: clutter tracklets gathered as a gather does, split in two new objects
   as a split does.
 
-The last pair moves a group at once, which single moves cannot do when the missed-detection
+The dissolve and gather pair moves a group at once, which single moves cannot do when the missed-detection
 term stands between: an object that is a poster seen in five tracklets loses hits (so pays
 misses) with each tracklet taken from it, and each such tracklet pays the misses of the others
 as a distractor. On ``clutter``, chains from the singleton and greedy starts held objects whose
