@@ -118,10 +118,6 @@ def _slice_footprint(
 ) -> NDArray[np.float64]:
     """(M, 2) where each slice's object stands by its bearing and range, in the map frame
     (the image problem: one mount for every slice)."""
-    poses = np.asarray(map_T_base, dtype=float)[problem.measurement_pose]
-    mount = problem.mount
-    cos, sin = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    camera_x = poses[:, 0] + cos * mount.offset_x_m - sin * mount.offset_y_m
-    camera_y = poses[:, 1] + sin * mount.offset_x_m + cos * mount.offset_y_m
-    azimuth = poses[:, 2] + mount.yaw_rad + bearing
-    return np.column_stack([camera_x + range_m * np.cos(azimuth), camera_y + range_m * np.sin(azimuth)])
+    cameras = np.array([problem.mount.camera_pose(p) for p in map_T_base]).reshape(-1, 3)[problem.measurement_pose]
+    azimuth = cameras[:, 2] + bearing
+    return cameras[:, :2] + range_m[:, None] * np.column_stack([np.cos(azimuth), np.sin(azimuth)])
