@@ -609,6 +609,13 @@ class SamplerConfig:
     solution_cache_size: int = setting(
         256, "graph solutions kept for warm starts and map building", minimum=1, expert=True
     )
+    sightings_cache_mb: int = setting(
+        256,
+        "megabytes of per-state sightings (how each state's things appear from every pose) a chain keeps; "
+        "about 5 MB a state on a 900-image run. Evicted ones are computed again, to the same numbers",
+        minimum=1,
+        expert=True,
+    )
     screen: ScreenConfig = setting(
         ScreenConfig(), "delayed acceptance: a cheap first look at each proposal", expert=True
     )

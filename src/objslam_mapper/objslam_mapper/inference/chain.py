@@ -30,17 +30,19 @@ close a loop, and their reverses, which part them (and can open a wrong loop), g
 from __future__ import annotations
 
 import math
-from collections import Counter, OrderedDict
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from cachetools import LRUCache
 from numpy.typing import ArrayLike
 
 from objslam_mapper.config import MoveConfig, ScreenConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
+from objslam_mapper.inference.caches import lru, remember
 from objslam_mapper.inference.moves import ClutterThings, Proposal, Proposals
 
 PROGRESS_MAX_STEPS = 500  # a cancelled build stops within this many steps of a chain
@@ -116,23 +118,18 @@ class CachedLogTarget:
 
     def __init__(self, fn: LogTarget, maxsize: int = 1_000_000):
         self._fn = fn
-        self._maxsize = maxsize
-        self._cache: OrderedDict[Association, float] = OrderedDict()
+        self._cache: LRUCache[Association, float] = lru(maxsize)
         self.evaluations = 0
 
     def __call__(self, state: Association) -> float:
         value = self._cache.get(state)
         if value is not None:
-            self._cache.move_to_end(state)
             return value
         value = float(self._fn(state))
         if math.isnan(value):
             raise SamplerError(f"log target is NaN for state {state.assignment}")
         self.evaluations += 1
-        self._cache[state] = value
-        if len(self._cache) > self._maxsize:
-            self._cache.popitem(last=False)
-        return value
+        return remember(self._cache, state, value)
 
 
 class Acceptance(NamedTuple):

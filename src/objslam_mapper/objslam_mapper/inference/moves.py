@@ -58,19 +58,21 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_right
-from collections import Counter, OrderedDict
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from itertools import accumulate
 from typing import Any
 
 import numpy as np
+from cachetools import LRUCache
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import expit
 
 from objslam_mapper.config import MoveConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
+from objslam_mapper.inference.caches import lru, remember
 
 MOVE_KINDS = (
     "merge",
@@ -205,14 +207,13 @@ class Proposals:
             probs.update(dict.fromkeys(CLUTTER_MOVES, 0.0))
         self.kind_weights = {k: p for k, p in probs.items() if p > 0.0}
         self._inv_two_scale2 = 0.5 / self.moves.distance_scale_m**2
-        self._views: OrderedDict[Association, StateView] = OrderedDict()
+        self._views: LRUCache[Association, StateView] = lru(_CACHE_SIZE)
         self._bipartitions: dict[tuple[tuple[int, ...], bytes], float] = {}
 
     # ---- state views -------------------------------------------------------------
     def view(self, state: Association) -> StateView:
         cached = self._views.get(state)
         if cached is not None:
-            self._views.move_to_end(state)
             return cached
         groups = state.groups
         centroids = np.zeros((len(groups), 2))
@@ -220,10 +221,7 @@ class Proposals:
             w = self.weights[list(g)]
             centroids[j] = w @ self.positions[list(g)] / w.sum()
         view = StateView(state, groups, [self.labels[g[0]] for g in groups], centroids)
-        self._views[state] = view
-        if len(self._views) > _CACHE_SIZE:
-            self._views.popitem(last=False)
-        return view
+        return remember(self._views, state, view)
 
     def _view_of(self, assignment: list[int]) -> StateView:
         return self.view(Association.of(assignment))

@@ -28,14 +28,15 @@ state, which agrees to the solver's tolerance).
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
 
 import numpy as np
+from cachetools import FIFOCache, LRUCache
 from numpy.typing import NDArray
 
 from objslam_mapper.graph.conditional_evidence import object_evidence
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.inference.association import Association
+from objslam_mapper.inference.caches import fifo, lru, remember
 from objslam_mapper.inference.detection import (
     MissTerms,
     Sight,
@@ -62,14 +63,15 @@ class ProposalScreen:
         self.target = target
         self.iterations = iterations
         # Per state: the poses and groups its screens are conditioned on (its MAP when first solved).
-        self._references: OrderedDict[Association, tuple[NDArray, NDArray, NDArray]] = OrderedDict()
-        self._group_evidence: OrderedDict[tuple[Association, GraphGroup], tuple[float, NDArray]] = OrderedDict()
+        self._references: LRUCache[Association, tuple[NDArray, NDArray, NDArray]] = lru(REFERENCE_CACHE_SIZE)
+        self._group_evidence: FIFOCache[tuple[Association, GraphGroup], tuple[float, NDArray]] = fifo(
+            OBJECT_EVIDENCE_CACHE_SIZE
+        )
 
     def _reference(self, state: Association) -> tuple[NDArray, NDArray, NDArray]:
         """(poses (N, 3), graph group of each measurement (M,), groups (G, 5)) of ``state``'s MAP."""
         cached = self._references.get(state)
         if cached is not None:
-            self._references.move_to_end(state)
             return cached
         if not self.target.graph_groups(state):
             owners = np.full(self.target.problem.measurement_count, -1, dtype=np.int64)
@@ -77,10 +79,7 @@ class ProposalScreen:
         else:
             sol = self.target.solution(state)
             reference = (np.asarray(sol.map_T_base), sol.object_of_measurement, estimates(sol))
-        self._references[state] = reference
-        if len(self._references) > REFERENCE_CACHE_SIZE:
-            self._references.popitem(last=False)
-        return reference
+        return remember(self._references, state, reference)
 
     def _conditional(self, state: Association, group: GraphGroup) -> tuple[float, NDArray[np.float64]]:
         """(log e(group), its object) with the poses fixed at ``state``'s MAP (conditional_evidence)."""
@@ -108,10 +107,7 @@ class ProposalScreen:
             result = (evidence.log_evidence, evidence.object_state)
             if np.isfinite(evidence.log_evidence):
                 break
-        self._group_evidence[key] = result
-        if len(self._group_evidence) > OBJECT_EVIDENCE_CACHE_SIZE:
-            self._group_evidence.popitem(last=False)
-        return result
+        return remember(self._group_evidence, key, result)
 
     def _screen_no_overlap(self, state: Association, new: Association) -> float:
         """Change of the no-overlap term from ``state`` to ``new``, objects at the screen's

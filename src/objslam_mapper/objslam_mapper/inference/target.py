@@ -35,11 +35,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections import OrderedDict
 from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+from cachetools import LRUCache
 from numpy.typing import NDArray
 
 from objslam_common.geometry import wrap_angle
@@ -49,6 +49,7 @@ from objslam_mapper.graph.problem import GraphProblem
 from objslam_mapper.graph.solver import GraphSolution
 from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
 from objslam_mapper.inference.association import Association
+from objslam_mapper.inference.caches import lru, lru_bytes, remember
 from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component, DistractorFit
 from objslam_mapper.inference.detection import Sightings, camera_view, sightings
 from objslam_mapper.inference.diagnostics import Work
@@ -62,7 +63,7 @@ from objslam_mapper.model.slice_model import BEARING, ELEVATION_TOP, MEASURED, W
 # - 1/2 log|Lambda| is exactly 0. Computed here rather than solved: such a state needs no graph.
 NO_OBJECT_LOG_EVIDENCE = 0.0
 
-SIGHTINGS_CACHE_SIZE = 1024
+CLUTTER_THINGS_CACHE_SIZE = 1024
 
 # Clutter tracklets of one class are tested for being one thing (``AssociationTarget.joins``)
 # when their rough positions (Tracklet.position_xy_m, from odometry and range-from-size) are
@@ -85,6 +86,7 @@ class TargetOptions(NamedTuple):
     detection: DetectionConfig = DetectionConfig(enabled=False)  # missed detections
     max_iterations: int | None = None  # per solve warm-started from the chain's state (None: solver.max_iterations)
     cache_size: int = 256  # graph solutions kept
+    sightings_cache_bytes: int = 256 * 2**20  # per-state sightings kept, in bytes (inference.caches)
 
     @classmethod
     def of(cls, config: SamplerConfig) -> TargetOptions:
@@ -95,6 +97,7 @@ class TargetOptions(NamedTuple):
             detection=config.detection,
             max_iterations=config.proposal_max_iterations,
             cache_size=config.solution_cache_size,
+            sightings_cache_bytes=config.sightings_cache_mb * 2**20,
         )
 
 
@@ -138,13 +141,13 @@ class AssociationTarget:
         self.estimation_problem = dataclasses.replace(self.problem, measurement_bounds=bounds)
         self.tracklets = list(tracklets)
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
-        self._solutions: OrderedDict[Association, GraphSolution] = OrderedDict()
+        self._solutions: LRUCache[Association, GraphSolution] = lru(options.cache_size)
         self._anchor: GraphSolution | None = None
         self._thing_components: dict[tuple[int, ...], Component] = {}
         self._join_graph: list[set[int]] | None = None
-        self._things: OrderedDict[Association, list[tuple[int, ...]]] = OrderedDict()
+        self._things: LRUCache[Association, list[tuple[int, ...]]] = lru(CLUTTER_THINGS_CACHE_SIZE)
         # Per state: how its graph groups appear, and the poses that was computed at.
-        self._sights: OrderedDict[Association, tuple[NDArray, Sightings]] = OrderedDict()
+        self._sights: LRUCache[Association, tuple[NDArray, Sightings]] = lru_bytes(options.sightings_cache_bytes)
 
     def component(self, t: int) -> Component:
         """How tracklet t is explained when it is clutter on its own (one distractor solve, remembered)."""
@@ -207,7 +210,6 @@ class AssociationTarget:
         A fixed function of the clutter set (ties broken by tracklet order)."""
         cached = self._things.get(state)
         if cached is not None:
-            self._things.move_to_end(state)
             return cached
         graph = self.joins()
         clutter = set(state.clutter)
@@ -222,11 +224,7 @@ class AssociationTarget:
             if self._value(joined) > self._value(first) + self._value(second):
                 for t in joined:
                     part_of[t] = joined
-        things = sorted(set(part_of.values()))
-        self._things[state] = things
-        if len(self._things) > SIGHTINGS_CACHE_SIZE:
-            self._things.popitem(last=False)
-        return things
+        return remember(self._things, state, sorted(set(part_of.values())))
 
     def graph_groups(self, state: Association) -> list[GraphGroup]:
         """The groups of ``state``'s factor graph: its objects in order, then its distractors."""
@@ -350,7 +348,6 @@ class AssociationTarget:
     def solution(self, state: Association) -> GraphSolution:
         cached = self._solutions.get(state)
         if cached is not None:
-            self._solutions.move_to_end(state)
             return cached
         start = time.perf_counter()
         max_iterations = None if self._anchor is None else self.options.max_iterations
@@ -360,10 +357,7 @@ class AssociationTarget:
         )
         self.work.solve_seconds += time.perf_counter() - start
         self.work.solves += 1
-        self._solutions[state] = result
-        if len(self._solutions) > self.options.cache_size:
-            self._solutions.popitem(last=False)
-        return result
+        return remember(self._solutions, state, result)
 
     def __call__(self, state: Association) -> float:
         if not self.graph_groups(state):
@@ -403,7 +397,6 @@ class AssociationTarget:
         """
         cached = self._sights.get(state)
         if cached is not None and cached[0] is map_T_base:
-            self._sights.move_to_end(state)
             return cached[1]
         groups = self.graph_groups(state)
         members = [self.measurements(g) for g in groups]
@@ -418,10 +411,7 @@ class AssociationTarget:
             on_table=on_table,
             kin=self.kin(groups),
         )
-        self._sights[state] = (map_T_base, seen)
-        if len(self._sights) > SIGHTINGS_CACHE_SIZE:
-            self._sights.popitem(last=False)
-        return seen
+        return remember(self._sights, state, (map_T_base, seen))[1]
 
     def move_to(self, state: Association) -> None:
         """The chain is now in ``state``: warm-start later solves from its solution."""
