@@ -35,8 +35,10 @@ def test_one_and_two_chains_are_timed_side_by_side(repo_root, tmp_path):
     # The same two chains one after another: each timed alone, the wall time split into the
     # slowest chain's own work and what running them in parallel adds.
     assert len(two["alone_s"]) == 2 and two["slowest_alone_s"] == max(two["alone_s"])
-    assert two["slowest_alone_to_one"] == pytest.approx(two["slowest_alone_s"] / rows[1]["wall_s"])
-    assert two["wall_to_slowest_alone"] == pytest.approx(two["wall_s"] / two["slowest_alone_s"])
+    assert two["slowest_alone_to_one"] == pytest.approx(two["slowest_alone_s"] / rows[1]["chain_s"])
+    assert two["sampling_to_slowest_alone"] == pytest.approx(two["sampling_s"] / two["slowest_alone_s"])
+    for row in rows.values():
+        assert 0.0 < row["outside_s"] < row["wall_s"] and row["sampling_s"] >= row["chain_s"] / row["chains"] * 0.5
     assert "alone_s" not in rows[1]
     # The table printed without --json, from the same figures (one bench run for both: they take seconds).
     table = format_table(result)

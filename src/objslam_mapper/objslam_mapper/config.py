@@ -452,6 +452,16 @@ class MoveConfig:
     gather_pair: float = setting(
         0.05, "probability of making two new objects of clutter tracklets of one class", minimum=0.0
     )
+    gather_into: float = setting(
+        0.05,
+        "probability of moving two or more clutter tracklets of one class into an existing object at once",
+        minimum=0.0,
+    )
+    shed: float = setting(
+        0.05,
+        "probability of moving two or more tracklets of an object (of three or more) to the clutter set at once",
+        minimum=0.0,
+    )
     distance_scale_m: float = setting(
         1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
     )
@@ -479,6 +489,8 @@ class MoveConfig:
             raise ValueError("dissolve and gather are each other's reverse: both or neither must be > 0")
         if (self.dissolve_pair > 0.0) != (self.gather_pair > 0.0):
             raise ValueError("dissolve_pair and gather_pair are each other's reverse: both or neither must be > 0")
+        if (self.gather_into > 0.0) != (self.shed > 0.0):
+            raise ValueError("gather_into and shed are each other's reverse: both or neither must be > 0")
 
 
 @dataclass(frozen=True)

@@ -120,10 +120,14 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
     draws = 400
     reported: dict[tuple[str, Association, Association], tuple[float, float]] = {}
     frequency: Counter = Counter()
+    stays: Counter = Counter()  # drawn moves that cannot be made: the chain stays
     for state in states:
         view = sampler.proposals.view(state)
         for _ in range(draws):
             p = sampler.proposals.propose(view, rng)
+            if p is None:
+                stays[state] += 1
+                continue
             key = (p.kind, state, p.view.state)
             assert p.view.state != state
             assert key not in reported or np.allclose(reported[key], (p.log_q_forward, p.log_q_reverse), atol=1e-12)
@@ -141,8 +145,9 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
             assert reverse[0] == pytest.approx(log_r, abs=1e-9), (kind, a, b)
             reverse_checked += 1
     assert reverse_checked > 0.95 * len(reported)
-    # Proposals never seen are rare: what was seen carries nearly all the mass, never more.
-    assert all(0.9 < q <= 1.0 + 1e-9 for q in total_q.values())
+    # Proposals never seen are rare: what was seen, with the stays, carries nearly all the mass, never more.
+    assert all(0.9 < q + stays[a] / draws and q <= 1.0 + 1e-9 for a, q in total_q.items())
+    assert {kind for kind, _, _ in reported} == set(MOVE_KINDS)
 
 
 def test_proposals_respect_classes_and_clutter_switch():
@@ -254,6 +259,13 @@ class ForgetsWholeThings(Proposals):
             view.things = things
 
 
+class ForgetsShedCoin(Proposals):
+    """Broken on purpose: a shed leaves out the coin that chose which side goes to clutter."""
+
+    def _log_shed(self, view, j, leaving):
+        return super()._log_shed(view, j, leaving) + math.log(2.0)
+
+
 class ForgetsPairGather(Proposals):
     """Broken on purpose: a pair dissolved into clutter leaves out, in its reverse, the
     probability of gathering exactly those tracklets again."""
@@ -268,29 +280,44 @@ class ForgetsPairGather(Proposals):
 # Group moves on their own (no merge/split), so a wrong gather ratio is not washed out.
 GROUP_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve=0.3, gather=0.3)
 PAIR_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve_pair=0.3, gather_pair=0.3)
+INTO_MOVES = MoveConfig(
+    merge=0.02,
+    split=0.02,
+    reassign=0.05,
+    to_clutter=0.05,
+    from_clutter=0.05,
+    dissolve=0.0,
+    gather=0.0,
+    dissolve_pair=0.0,
+    gather_pair=0.0,
+    gather_into=0.4,
+    shed=0.4,
+)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("broken", "moves"),
+    ("broken", "moves", "min_tv"),
     [
-        (ForgetsReverseDestination, None),
-        (HalvesBipartitions, MoveConfig(dissolve=0.0, gather=0.0)),
-        (GathersFromOneSeed, GROUP_MOVES),
-        (ForgetsWholeThings, GROUP_MOVES),
-        (ForgetsPairGather, PAIR_MOVES),
+        (ForgetsReverseDestination, None, 0.08),
+        (HalvesBipartitions, MoveConfig(dissolve=0.0, gather=0.0, gather_into=0.0, shed=0.0), 0.08),
+        (GathersFromOneSeed, GROUP_MOVES, 0.08),
+        (ForgetsWholeThings, GROUP_MOVES, 0.08),
+        (ForgetsPairGather, PAIR_MOVES, 0.08),
+        # A factor of two on one move pair between few states: the smallest error here (0.061
+        # against 0.021 unbroken, the chain's seed fixed).
+        (ForgetsShedCoin, INTO_MOVES, 0.055),
     ],
 )
-def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken, moves):
+def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken, moves, min_tv):
     """The exact comparison above has the power to see a wrong ratio."""
-    labels, clutter, seed, steps = (
-        CASES["3+2 tracklets, clutter"] if moves in (GROUP_MOVES, PAIR_MOVES) else CASES["2+2 tracklets, clutter"]
-    )
+    group = moves in (GROUP_MOVES, PAIR_MOVES, INTO_MOVES)
+    labels, clutter, seed, steps = CASES["3+2 tracklets, clutter"] if group else CASES["2+2 tracklets, clutter"]
     things = broken is ForgetsWholeThings
     tv, _ = run_chain(broken, labels, clutter, seed, steps, moves=moves, things=things)
-    assert tv > 0.08
-    if moves in (GROUP_MOVES, PAIR_MOVES):  # the same moves, unbroken, pass
-        assert run_chain(Proposals, labels, clutter, seed, steps, moves=moves, things=things)[0] < 0.05
+    assert tv > min_tv
+    if group:  # the same moves, unbroken, pass
+        assert run_chain(Proposals, labels, clutter, seed, steps, moves=moves, things=things)[0] < min(0.05, min_tv / 2)
 
 
 # ---- the run's bookkeeping ----------------------------------------------------------------
@@ -372,10 +399,38 @@ def test_two_objects_of_one_class_go_to_clutter_in_one_move():
     proposals = Proposals(labels, positions_xy_m=[[0.0, 0.0], [1.1, 0.0], [3.0, 0.0]])
     view = proposals.view(Association.of([0, 1, 2]))
     rng = np.random.default_rng(0)
-    reached = {p.view.state: p for p in (proposals.propose(view, rng) for _ in range(500)) if p.kind == "dissolve_pair"}
+    reached = {
+        p.view.state: p for p in (proposals.propose(view, rng) for _ in range(500)) if p and p.kind == "dissolve_pair"
+    }
     both = Association.of([CLUTTER, CLUTTER, 0])
     assert set(reached) == {both}
     # Its reverse gathers the two clutter tracklets and splits them in two again.
     back = proposals.view(both)
-    gathered = {p.view.state for p in (proposals.propose(back, rng) for _ in range(500)) if p.kind == "gather_pair"}
+    gathered = {
+        p.view.state for p in (proposals.propose(back, rng) for _ in range(500)) if p and p.kind == "gather_pair"
+    }
     assert gathered == {view.state}
+
+
+def test_clutter_tracklets_join_an_object_together_and_leave_it_together():
+    """Three clutter tracklets of a real object (office seed 15, docs/method.md): no one or two
+    of them gain by joining it, all three do, so they must move at once."""
+    labels = ["r", "r", "r", "r", "g"]
+    positions = [[0.0, 0.0], [0.2, 0.1], [0.1, -0.2], [-0.1, 0.2], [3.0, 0.0]]
+    proposals = Proposals(labels, positions_xy_m=positions)
+    parted = Association.of([0, CLUTTER, CLUTTER, CLUTTER, 1])
+    whole = Association.of([0, 0, 0, 0, 1])
+    rng = np.random.default_rng(1)
+    view = proposals.view(parted)
+    joins = [p for p in (proposals.propose(view, rng) for _ in range(2000)) if p and p.kind == "gather_into"]
+    reached = Counter(p.view.state for p in joins)
+    assert whole in reached and all(set(s.clutter) < {1, 2, 3} and len(s.clutter) <= 1 for s in reached)
+    forward = next(p for p in joins if p.view.state == whole)
+    assert reached[whole] / 2000 == pytest.approx(math.exp(forward.log_q_forward), abs=0.02)
+    # Its reverse, from the whole object, sheds exactly those three again (among other parts).
+    back = proposals.view(whole)
+    sheds = [p for p in (proposals.propose(back, rng) for _ in range(4000)) if p and p.kind == "shed"]
+    assert all(len(p.view.state.clutter) >= 2 and p.view.state.n_objects == 2 for p in sheds)
+    shed_back = [p for p in sheds if p.view.state == parted]
+    assert shed_back and shed_back[0].log_q_forward == pytest.approx(forward.log_q_reverse)
+    assert shed_back[0].log_q_reverse == pytest.approx(forward.log_q_forward)

@@ -14,6 +14,10 @@ come in reverse pairs so every proposal has an exact Hastings ratio:
 - ``dissolve_pair``: two objects of one class (drawn as a merge draws them) into clutter
   <->  ``gather_pair``: clutter tracklets gathered as a gather does, split in two new objects
   as a split does.
+- ``gather_into``: clutter tracklets gathered as a gather does, into an existing object of
+  their class (drawn by closeness to the nearest of them)  <->  ``shed``: an object of three
+  or more tracklets split as a split splits it, one side (by a coin, two or more
+  tracklets) to clutter.
 
 The dissolve and gather pair moves a group at once, which single moves cannot do when the missed-detection
 term stands between: an object that is a poster seen in five tracklets loses hits (so pays
@@ -33,6 +37,15 @@ singletons and greedy) held a poster seen in two tracklets 1.1 m apart as two ob
 408 nats below the other chains' state with both tracklets one distractor, for 6000
 steps: either tracklet alone to clutter cost 34 or 218 nats, and merging the two objects
 first (then dissolving them) 158.
+
+``gather_into`` takes a part of an object held as clutter: on ``office`` seed 15 two of four
+chains held three red tracklets (5, 13 and 12 slices) of a real object as distractors, 305
+nats below the state with them in the object, for 6000 steps: any one of them joining it
+cost 124 to 313 nats, any two -122 to +107 (the screen never let those through), the three
+as a new object 108.
+
+A drawn move that cannot be made (a gather whose class has no object, a shed whose drawn
+side is one tracklet) proposes nothing: the chain stays, which leaves every ratio exact.
 
 The move kind is drawn among the kinds possible in the current state (nothing to split,
 no clutter...) in proportion to configured weights, so P(m | J) depends on J. With a move m
@@ -84,6 +97,8 @@ MOVE_KINDS = (
     "gather",
     "dissolve_pair",
     "gather_pair",
+    "gather_into",
+    "shed",
 )
 REVERSE_MOVE = {
     "merge": "split",
@@ -95,8 +110,19 @@ REVERSE_MOVE = {
     "gather": "dissolve",
     "dissolve_pair": "gather_pair",
     "gather_pair": "dissolve_pair",
+    "gather_into": "shed",
+    "shed": "gather_into",
 }
-CLUTTER_MOVES = ("to_clutter", "from_clutter", "dissolve", "gather", "dissolve_pair", "gather_pair")
+CLUTTER_MOVES = (
+    "to_clutter",
+    "from_clutter",
+    "dissolve",
+    "gather",
+    "dissolve_pair",
+    "gather_pair",
+    "gather_into",
+    "shed",
+)
 _NEW = -2  # destination key: a new object
 THING_GATHER_SHARE = 0.5  # of gathers: exactly one clutter thing's tracklets (module docstring)
 _CACHE_SIZE = 20_000  # per-state proposal weights kept
@@ -257,6 +283,8 @@ class Proposals:
                 "gather": len(self._gather_seeds(view)) > 0,
                 "dissolve_pair": len(self._merges(view)) > 0,
                 "gather_pair": len(self._gather_seeds(view)) > 0,
+                "gather_into": len(self._gather_seeds(view)) > 0 and bool(view.groups),
+                "shed": len(self._shedding(view)) > 0,
             }
             kinds = [k for k in self.kind_weights if possible[k]]
             view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
@@ -552,8 +580,59 @@ class Proposals:
         log_r = self._kinds(new).log_prob("dissolve_pair") + self._merges(new).log_prob(pair)
         return Proposal("gather_pair", new, log_f, log_r)
 
+    @staticmethod
+    def _shedding(view: StateView) -> list[int]:
+        """Objects of three or more tracklets: what a shed takes (two or more go, one stays)."""
+        return [j for j, g in enumerate(view.groups) if len(g) > 2]
+
+    def _hosts(self, view: StateView, members: Sequence[int]) -> _Choice:
+        """The objects that clutter tracklets ``members`` (of one class) may join, weighted by
+        closeness to the nearest of them; empty when their class has no object."""
+        keys = [j for j, lab in enumerate(view.labels) if lab == self.labels[members[0]]]
+        if not keys:
+            return _Choice([], [])
+        d2 = np.min([self._tracklet_distance2(t, view.centroids[keys]) for t in members], axis=0)
+        return _Choice(keys, self._closeness(d2))
+
+    def _log_shed(self, view: StateView, j: int, leaving: Sequence[int]) -> float:
+        """log q of object j shedding ``leaving`` to clutter, without the kind factor: the object,
+        the bipartition {leaving, rest} and the coin that sends ``leaving``."""
+        members = view.groups[j]
+        side_p = np.array([t in leaving for t in members])
+        return -math.log(len(self._shedding(view))) + self._log_bipartition(members, side_p) - math.log(2.0)
+
+    def _propose_gather_into(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
+        members = self._draw_gather(view, rng)
+        hosts = self._hosts(view, members)
+        if not hosts:
+            return None
+        host = hosts.draw(rng)
+        new = self._view_of([host if t in members else a for t, a in enumerate(view.assignment)])
+        log_f = self._kinds(view).log_prob("gather_into") + self._log_gather(view, members) + hosts.log_prob(host)
+        j = new.assignment[members[0]]
+        log_r = self._kinds(new).log_prob("shed") + self._log_shed(new, j, members)
+        return Proposal("gather_into", new, log_f, log_r)
+
+    def _propose_shed(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
+        shedding = self._shedding(view)
+        j = shedding[int(rng.integers(len(shedding)))]
+        members = view.groups[j]
+        side_p = self._draw_bipartition(members, rng)
+        if rng.random() < 0.5:
+            side_p = ~side_p
+        leaving = [t for t, on in zip(members, side_p, strict=True) if on]
+        if len(leaving) < 2:
+            return None
+        new = self._view_of([CLUTTER if t in leaving else a for t, a in enumerate(view.assignment)])
+        log_f = self._kinds(view).log_prob("shed") + self._log_shed(view, j, leaving)
+        staying = next(t for t in members if t not in leaving)
+        log_r = self._kinds(new).log_prob("gather_into") + self._log_gather(new, leaving)
+        log_r += self._hosts(new, leaving).log_prob(new.assignment[staying])
+        return Proposal("shed", new, log_f, log_r)
+
     def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
-        """A proposal from ``view``'s state, or None when no move is possible there."""
+        """A proposal from ``view``'s state, or None when no move is possible there or the
+        drawn one cannot be made (the chain then stays)."""
         kinds = self._kinds(view)
         if not kinds:
             return None
