@@ -10,9 +10,9 @@ from objslam_common.mount import CameraMountConfig
 from objslam_common.records import ImageSlices, OdometrySample
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.problem import build_problem
-from objslam_mapper.inference.chains import ChainRunner, InProcess
+from objslam_mapper.inference.chains import ChainOutcome, ChainRunner, InProcess
 from objslam_mapper.inference.diagnostics import PhaseProgress
-from objslam_mapper.inference.infer import finish, prepare
+from objslam_mapper.inference.infer import Inference, finish, prepare
 from objslam_mapper.map_file import BuiltMap
 
 
@@ -43,19 +43,53 @@ def build_maps(
     ``mounts``: each run's camera mount (default: ``config.camera_mount`` for all)."""
     mounts = mounts if mounts is not None else [config.camera_mount] * len(runs)
     prepared = [
-        prepare(
-            build_problem(odometry, images, mount.to_mount(), catalog, config.graph),
-            config.sampler,
-            progress,
-        )
+        prepare_run(odometry, images, config, catalog, mount, progress)
         for (odometry, images), mount in zip(runs, mounts, strict=True)
     ]
-    tasks = [task for inference in prepared for task in inference.tasks]
-    outcomes = (runner or InProcess()).run(tasks, prepared[0].report_sampling if prepared else None)
+    return run_prepared(prepared, runner, progress)
+
+
+@dataclasses.dataclass(frozen=True)
+class PreparedRun:
+    """One run between :func:`prepare_run` and :func:`finish_run`: its inference and input counts.
+    It pickles (without a progress callback), so a run may be prepared where it was read."""
+
+    inference: Inference
+    odometry_messages: int
+    slice_arrays: int
+
+
+def prepare_run(
+    odometry: Sequence[OdometrySample],
+    images: Sequence[ImageSlices],
+    config: MapperConfig,
+    catalog: Catalog,
+    mount: CameraMountConfig,
+    progress: PhaseProgress | None = None,
+) -> PreparedRun:
+    """The factor graph's fixed part, the tracklets and the chain tasks of one run."""
+    problem = build_problem(odometry, images, mount.to_mount(), catalog, config.graph)
+    return PreparedRun(prepare(problem, config.sampler, progress), len(odometry), len(images))
+
+
+def run_prepared(
+    prepared: Sequence[PreparedRun], runner: ChainRunner | None = None, progress: PhaseProgress | None = None
+) -> list[BuiltMap]:
+    """Every chain of the prepared runs handed to ``runner`` at once, then each run's map."""
+    for run in prepared:
+        run.inference.watch.progress = progress
+        run.inference.watch.resume()
+    tasks = [task for run in prepared for task in run.inference.tasks]
+    outcomes = (runner or InProcess()).run(tasks, prepared[0].inference.report_sampling if prepared else None)
     built = []
-    for (odometry, images), inference in zip(runs, prepared, strict=True):
-        mine, outcomes = outcomes[: len(inference.tasks)], outcomes[len(inference.tasks) :]
-        one = finish(inference, mine)
-        inputs = {"odometry_messages": len(odometry), "slice_arrays": len(images)}
-        built.append(dataclasses.replace(one, diagnostics={**inputs, **one.diagnostics}))
+    for run in prepared:
+        mine, outcomes = outcomes[: len(run.inference.tasks)], outcomes[len(run.inference.tasks) :]
+        built.append(finish_run(run, mine))
     return built
+
+
+def finish_run(run: PreparedRun, outcomes: Sequence[ChainOutcome]) -> BuiltMap:
+    """Algorithm 1 over the run's chains (``outcomes`` of its tasks, in their order)."""
+    one = finish(run.inference, outcomes)
+    inputs = {"odometry_messages": run.odometry_messages, "slice_arrays": run.slice_arrays}
+    return dataclasses.replace(one, diagnostics={**inputs, **one.diagnostics})

@@ -57,6 +57,13 @@ class Stopwatch:
         self.ends[phase] = time.perf_counter()
         return self.ends[phase] - previous
 
+    def resume(self) -> None:
+        """Start the next phase now: the marks shift so the last phase ends now, each phase
+        keeping its length (a run prepared in another process, or before other runs)."""
+        shift = time.perf_counter() - max(self.ends.values(), default=self.started)
+        self.started += shift
+        self.ends = {phase: end + shift for phase, end in self.ends.items()}
+
     def seconds(self, phase: str) -> float:
         """How long ``phase`` took (from the previous phase's end)."""
         ends = list(self.ends.items())

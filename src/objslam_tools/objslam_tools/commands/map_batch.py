@@ -14,9 +14,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="map many bags as one job: detection and chains as Ray tasks, one table at the end",
         description=(
             "Map each BAG as `objslam map` would (the same map for the same settings), as one job: the "
-            "detector runs on every bag as a task, then every chain of every bag as a task, on a local Ray "
-            "(every core) or the cluster of --ray. Writes DIR/<bag name>.yaml per bag and prints one table: "
-            "bag, objects, converged, time."
+            "detector and the tracklets run on every bag as a task, then every chain of every bag as a task, "
+            "on a local Ray (every core) or the cluster of --ray. Writes DIR/<bag name>.yaml per bag and "
+            "prints one table: bag, objects, converged, time."
         ),
     )
     parser.add_argument("bags", nargs="+", metavar="BAG", help="rosbag2 directories (MCAP or sqlite3)")
@@ -35,12 +35,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _detect(path: str, detector_config: Any, catalog: Any, mount: Any) -> Any:
-    """One bag's inputs (a Ray task)."""
+def _detect_and_prepare(path: str, detector_config: Any, catalog: Any, config: Any) -> tuple[Any, Any]:
+    """One bag's inputs, and its run prepared for the chains (tracklets and chain tasks): a Ray
+    task, so the bags' preparations run side by side, not one after another here."""
+    from objslam_mapper.pipeline import prepare_run
     from objslam_tools.bag import open_bag
     from objslam_tools.mapping import bag_inputs
 
-    return bag_inputs(open_bag(path), detector_config, catalog, progress=False, mount=mount)
+    read = bag_inputs(open_bag(path), detector_config, catalog, progress=False, mount=config.camera_mount)
+    return read, prepare_run(read.odometry, read.images, config, catalog, read.camera_mount)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
     from objslam_mapper.parallel import RayRunner, running_chains
-    from objslam_mapper.pipeline import build_maps
+    from objslam_mapper.pipeline import run_prepared
     from objslam_tools.bag import open_bag
     from objslam_tools.errors import UserError
     from objslam_tools.mapping import with_sampler_overrides
@@ -82,19 +85,17 @@ def run(args: argparse.Namespace) -> int:
     with running_chains(config.parallel, max(2, config.sampler.chains), args.ray) as runner:
         if isinstance(runner, RayRunner):
             ray = runner.ray()
-            detect = ray.remote(num_cpus=1)(_detect)
-            inputs = ray.get([detect.remote(str(b.path), detector_config, catalog, config.camera_mount) for b in bags])
+            detect = ray.remote(num_cpus=1)(_detect_and_prepare)
+            ready = ray.get([detect.remote(str(b.path), detector_config, catalog, config) for b in bags])
         else:
-            inputs = [_detect(str(b.path), detector_config, catalog, config.camera_mount) for b in bags]
+            ready = [_detect_and_prepare(str(b.path), detector_config, catalog, config) for b in bags]
+        inputs = [read for read, _ in ready]
         detected = time.monotonic()
         sampling = StderrProgress("sampling", unit="steps")
-        maps = build_maps(
-            [(i.odometry, i.images) for i in inputs],
-            config,
-            catalog,
+        maps = run_prepared(
+            [prepared for _, prepared in ready],
+            runner,
             progress=lambda phase, done, total: sampling(done, total) if phase == "sampling" else None,
-            runner=runner,
-            mounts=[i.camera_mount for i in inputs],
         )
     elapsed = time.monotonic() - started
     print(f"{'bag':24s} {'objects':>7s} {'rejected':>8s}  {'converged':9s} {'R-hat max':>9s} {'chains s':>9s}")
@@ -112,6 +113,6 @@ def run(args: argparse.Namespace) -> int:
             f"{convergence.get('rhat_max', '-')!s:>9s} {built.diagnostics['timings_s'].get('chains', 0.0):9.1f}"
             f"   -> {path}"
         )
-    print(f"{len(maps)} bags in {elapsed:.1f} s wall (detection {detected - started:.1f} s)")
+    print(f"{len(maps)} bags in {elapsed:.1f} s wall (detection and tracklets {detected - started:.1f} s)")
     print("chains s: the seconds of a bag's chains, summed (they ran side by side with the others')")
     return 0
