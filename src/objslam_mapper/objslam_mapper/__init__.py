@@ -5,3 +5,7 @@ its solvers, ``inference`` the unknown data association and map building, ``pipe
 the one entry point. None of it imports rclpy or message types; the node and its message
 helpers live under ``ros``.
 """
+
+# First, before any module here loads numpy: it pins BLAS to one thread (objslam_common.process);
+# a script or a Ray worker that imports a submodule directly would otherwise get a thread per core.
+import objslam_common  # noqa: F401

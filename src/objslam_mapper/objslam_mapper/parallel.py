@@ -23,13 +23,14 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
+from objslam_common.process import BLAS_THREAD_VARIABLES
 from objslam_mapper.config import ParallelConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.chains import ChainOutcome, ChainRunner, ChainTask, InProcess, run_chain_task
 
 logger = logging.getLogger(__name__)
 
-_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+_THREADS = dict.fromkeys(BLAS_THREAD_VARIABLES, "1")
 _POLL_S = 0.5
 
 
