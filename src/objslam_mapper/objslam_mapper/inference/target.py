@@ -25,7 +25,11 @@ Each solve is warm-started from the chain's current state (a proposal differs fr
 one move) and capped at ``proposal_max_iterations`` per phase of the outlier caps: a
 hopeless proposal (a merge of objects metres apart) then costs a few iterations and is
 rejected on the evidence at its last iterate, which is below its optimum. Values are
-cached per state, so the chain sees one fixed target whatever path led to a state.
+cached per state, so the chain sees one fixed target whatever path led to a state. Another
+chain may reach the same state from elsewhere, and its solve find another local optimum of
+trajectory and objects (on ``clutter`` seed 13 one state was worth 51632 nats in one chain
+and 51318 solved from the odometry; docs/method.md): each value is a lower bound on the
+state's best evidence.
 
 The screen of proposals (:mod:`objslam_mapper.inference.screen`) and the start state
 (:mod:`objslam_mapper.inference.start`) are built on it.
