@@ -18,7 +18,6 @@ first), before numpy loads its BLAS; a value the user exported wins.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import logging
 import os
 import sys
@@ -50,8 +49,9 @@ def keep_freed_memory() -> bool:
     if not sys.platform.startswith("linux") or any(v in os.environ for v in _ALLOCATOR_VARIABLES):
         return False
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
+        # The symbols this process already has: the C library whose allocator is in use, found
+        # without the search (and, on some systems, the subprocess) of ctypes.util.find_library.
+        mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # musl and others have no mallopt
         return False
     ok = mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES) == 1 and mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES) == 1
