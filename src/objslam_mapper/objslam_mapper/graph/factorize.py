@@ -27,6 +27,8 @@ import scipy.sparse.linalg
 from numpy.typing import NDArray
 from scipy.linalg import lapack
 
+from objslam_mapper.graph.fold import FoldPlan, folded_steps
+from objslam_mapper.graph.fold import fold as fold_objects
 from objslam_mapper.graph.linearize import AssociationSystem, Linearization
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
 
@@ -46,6 +48,7 @@ class Factorization:
     chol_pose: NDArray[np.float64] | None = None  # dense path: banded upper Cholesky factor U of the pose block
     w_cross: NDArray[np.float64] | None = None  # dense path: W = U^-T B
     sparse_lu: scipy.sparse.linalg.SuperLU | None = None  # sparse path
+    folded: bool = False  # dense path with objects folded into the pose band: steps and log|Lambda| only
 
 
 def _sparse_values(lin: Linearization) -> NDArray[np.float64]:
@@ -59,14 +62,16 @@ def _sparse_values(lin: Linearization) -> NDArray[np.float64]:
 
 
 @functools.lru_cache(maxsize=8)
-def _band_index(n_poses: int) -> tuple[tuple[NDArray, NDArray], NDArray, tuple[NDArray, NDArray], NDArray]:
-    """Where the pose blocks go in LAPACK upper banded storage ab[BAND + i - j, j]."""
+def _band_index(
+    n_poses: int, half_width: int = _BAND
+) -> tuple[tuple[NDArray, NDArray], NDArray, tuple[NDArray, NDArray], NDArray]:
+    """Where the pose blocks go in LAPACK upper banded storage ab[half_width + i - j, j]."""
     p, a, b = np.meshgrid(np.arange(n_poses), np.arange(3), np.arange(3), indexing="ij")
     upper = (a <= b).ravel()
-    diag_at = ((_BAND + a - b).ravel()[upper], (3 * p + b).ravel()[upper])
+    diag_at = ((half_width + a - b).ravel()[upper], (3 * p + b).ravel()[upper])
     diag_src = (9 * p + 3 * a + b).ravel()[upper]
     p, a, b = np.meshgrid(np.arange(max(n_poses - 1, 0)), np.arange(3), np.arange(3), indexing="ij")
-    off_at = ((_BAND + a - b - 3).ravel(), (3 * p + 3 + b).ravel())
+    off_at = ((half_width + a - b - 3).ravel(), (3 * p + 3 + b).ravel())
     off_src = (9 * p + 3 * a + b).ravel()
     return diag_at, diag_src, off_at, off_src
 
@@ -102,13 +107,15 @@ def information_matrix(system: AssociationSystem, lin: Linearization) -> NDArray
     return sparse_information(system, lin).toarray()
 
 
-def factorize(system: AssociationSystem, lin: Linearization, damping: float) -> Factorization:
+def factorize(system: AssociationSystem, lin: Linearization, damping: float, *, fold: bool = True) -> Factorization:
     """Solve the normal equations, Marquardt-damped (``diag *= 1 + damping``) if asked.
 
+    ``fold``: the dense path may fold short-lived objects into the pose band
+    (:mod:`.fold`); the covariances need it off (they read the whole complement).
     Raises LinAlgError if the system is not positive definite.
     """
     if system.n_objects <= system.dense_object_limit:
-        fac = _factorize_schur(system, lin, damping)
+        fac = _factorize_schur(system, lin, damping, system.layout.fold_plan if fold else None)
     else:
         fac = _factorize_sparse(system, lin, damping)
     # Decrease of the quadratic model: 1/2 (-g^T step + damping step^T diag(Lambda) step).
@@ -124,15 +131,17 @@ def factorize(system: AssociationSystem, lin: Linearization, damping: float) -> 
     return fac
 
 
-def _factorize_schur(system: AssociationSystem, lin: Linearization, damping: float) -> Factorization:
+def _factorize_schur(
+    system: AssociationSystem, lin: Linearization, damping: float, plan: FoldPlan | None
+) -> Factorization:
     """Poses first: with A = U^T U, W = U^-T B and w = U^-T g_pose, S = C - W^T W,
     step_dense = S^-1 (W^T w - g_dense), step_pose = -U^-1 (w + W step_dense).
 
     The dense variables are the objects, then the calibration (if estimated): ``B`` holds
-    their pose blocks, ``C`` their own (objects and calibration share no factor)."""
+    their pose blocks, ``C`` their own (objects and calibration share no factor). With a
+    ``plan``, its folded objects are eliminated into ``A`` and ``g_pose`` first (:mod:`.fold`)
+    and the dense variables are the objects it keeps."""
     n, k, nc = system.n_poses, system.n_objects, system.n_calib
-    n_object_vars = OBJECT_DIM * k
-    diag_at, diag_src, off_at, off_src = _band_index(n)
     pose_diag, object_diag, calib_diag = lin.pose_diag, lin.object_diag, lin.calib_diag
     if damping > 0.0:
         pose_diag, object_diag, calib_diag = pose_diag.copy(), object_diag.copy(), calib_diag.copy()
@@ -140,15 +149,36 @@ def _factorize_schur(system: AssociationSystem, lin: Linearization, damping: flo
         pose_diag[:, i3, i3] *= 1.0 + damping
         object_diag[:, i5, i5] *= 1.0 + damping
         calib_diag[np.diag_indices(nc)] *= 1.0 + damping
-    band = np.zeros((_BAND + 1, POSE_DIM * n))
+    half_width = _BAND if plan is None else plan.half_width
+    diag_at, diag_src, off_at, off_src = _band_index(n, half_width)
+    band = np.zeros((half_width + 1, POSE_DIM * n))
     band[diag_at] = pose_diag.ravel()[diag_src]
     band[off_at] = lin.pose_off.ravel()[off_src]
+    grad_pose, grad_object = lin.grad_pose, lin.grad_object
+    folded = None
+    if plan is not None:
+        folded = fold_objects(plan, lin.cross, object_diag, grad_object.reshape(k, OBJECT_DIM), n)
+        band -= folded.band
+        grad_pose = grad_pose - folded.grad_pose
+        k = len(plan.kept)
+        object_diag = object_diag[plan.kept]
+        grad_object = grad_object.reshape(-1, OBJECT_DIM)[plan.kept].ravel()
+    n_object_vars = OBJECT_DIM * k
     chol_pose = scipy.linalg.cholesky_banded(band, lower=False, check_finite=False)
-    log_det = 2.0 * float(np.sum(np.log(chol_pose[_BAND])))
+    log_det = 2.0 * float(np.sum(np.log(chol_pose[half_width])))
+    if folded is not None:
+        log_det += folded.log_det
     rhs = np.empty((POSE_DIM * n, n_object_vars + nc + 1), order="F")
-    rhs[:, :n_object_vars] = lin.pose_object(system.layout)
+    if plan is None:
+        rhs[:, :n_object_vars] = lin.pose_object(system.layout)
+    else:
+        weights = lin.cross[:, :, plan.kept_slices].ravel()
+        size = POSE_DIM * n * n_object_vars
+        rhs[:, :n_object_vars] = np.bincount(plan.kept_bins.ravel(), weights, minlength=size).reshape(
+            POSE_DIM * n, n_object_vars
+        )
     rhs[:, n_object_vars:-1] = lin.pose_calib.reshape(POSE_DIM * n, nc)
-    rhs[:, -1] = lin.grad_pose
+    rhs[:, -1] = grad_pose
     whitened, info = lapack.dtbtrs(chol_pose, rhs, uplo="U", trans="T", overwrite_b=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
@@ -159,17 +189,25 @@ def _factorize_schur(system: AssociationSystem, lin: Linearization, damping: flo
         schur = -(w_cross.T @ w_cross)
         schur[_block_diag_index(k, OBJECT_DIM)] += object_diag.ravel()
         schur[n_object_vars:, n_object_vars:] += calib_diag
-        grad_dense = np.concatenate([lin.grad_object, lin.grad_calib]) if nc else lin.grad_object
+        grad_dense = np.concatenate([grad_object, lin.grad_calib]) if nc else grad_object
         chol_schur = scipy.linalg.cholesky(schur, lower=False, check_finite=False)
         log_det += 2.0 * float(np.sum(np.log(np.diag(chol_schur))))
         step_dense = scipy.linalg.cho_solve((chol_schur, False), w_cross.T @ w_grad - grad_dense, check_finite=False)
     back, info = lapack.dtbtrs(chol_pose, (w_grad + w_cross @ step_dense)[:, None], uplo="U", trans="N")
     if info != 0:
         raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
+    step_pose = -back[:, 0]
+    step_object = step_dense[:n_object_vars]
+    if plan is not None and folded is not None:
+        steps = np.empty((system.n_objects, OBJECT_DIM))
+        steps[plan.kept] = step_object.reshape(-1, OBJECT_DIM)
+        steps[plan.folded] = folded_steps(plan, folded, step_pose)
+        step_object = steps.ravel()
+        return Factorization(log_det, step_pose, step_object, 0.0, step_dense[n_object_vars:], folded=True)
     return Factorization(
         log_det=log_det,
-        step_pose=-back[:, 0],
-        step_object=step_dense[:n_object_vars],
+        step_pose=step_pose,
+        step_object=step_object,
         predicted_decrease=0.0,
         step_calib=step_dense[n_object_vars:],
         chol_schur=chol_schur,
@@ -212,7 +250,8 @@ def dense_inverse_columns(system: AssociationSystem, fac: Factorization, first: 
     split = POSE_DIM * system.n_poses
     unit = np.zeros((split + OBJECT_DIM * system.n_objects + system.n_calib, count))
     unit[split + first : split + first + count] = np.eye(count)
-    assert fac.sparse_lu is not None  # neither dense nor sparse: not a factorization of this module
+    # A folded factorization keeps no inverse: the covariances factorize with fold=False.
+    assert fac.sparse_lu is not None and not fac.folded
     return fac.sparse_lu.solve(unit)[split + first : split + first + count]
 
 
@@ -227,7 +266,7 @@ def solve_pose_rhs(system: AssociationSystem, fac: Factorization, rhs_pose: NDAr
         rhs = np.zeros((POSE_DIM * system.n_poses + OBJECT_DIM * system.n_objects + system.n_calib, rhs_pose.shape[1]))
         rhs[: len(rhs_pose)] = rhs_pose
         return fac.sparse_lu.solve(rhs)
-    assert fac.chol_pose is not None and fac.w_cross is not None  # the dense path's
+    assert fac.chol_pose is not None and fac.w_cross is not None  # the dense path's, not folded
     z, info = lapack.dtbtrs(fac.chol_pose, rhs_pose, uplo="U", trans="T")
     if info != 0:
         raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")

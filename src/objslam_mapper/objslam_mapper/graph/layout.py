@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from objslam_mapper.graph.fold import FoldPlan, fold_plan
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, GraphError, GraphProblem
 
 
@@ -38,6 +39,11 @@ class Layout:
     @functools.cached_property
     def sparse(self) -> SparsePattern:
         return SparsePattern.of(self)
+
+    @functools.cached_property
+    def fold_plan(self) -> FoldPlan | None:
+        """The objects the dense path folds into the pose band (:mod:`.fold`); None: none."""
+        return fold_plan(self)
 
 
 def layout_of(problem: GraphProblem, groups: Sequence[ArrayLike], priors: ArrayLike | None = None) -> Layout:

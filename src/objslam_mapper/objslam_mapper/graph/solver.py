@@ -218,9 +218,9 @@ def solve(
         state, lin, final, more, converged = _minimize(graph, state, lin, problem.solver, limit)
         iterations += more
     poses, objects, calib = state
-    if final is None:
+    if final is None or (with_covariances and final.folded):
         try:
-            final = factorize(graph, lin, 0.0)
+            final = factorize(graph, lin, 0.0, fold=not with_covariances)
         except np.linalg.LinAlgError:
             # Damping gave up where the information is not positive definite: no optimum, so
             # no Laplace evidence (seen fitting one distractor to slices of two things).
