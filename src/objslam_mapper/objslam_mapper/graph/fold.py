@@ -5,10 +5,10 @@ own 5x5 block, inverted alone) adds ``B_j C_j^-1 B_j^T`` to the pose block withi
 of half-width ``3 (b - a + 1) - 1``; the dense Schur complement (5K x 5K from 3N rows)
 is then over the objects left. A chain started from singletons holds a hundred or more
 tracklets as objects on a long run, most seen over a few dozen poses, and there the
-complement was most of a solve (``loop`` seed 13: 47 ms a factorization at 159 objects
+complement was most of a solve (``loop`` seed 13: 40-47 ms a factorization at 159 objects
 on 900 poses). Which objects fold is chosen per layout by a cost model of the
 factorization's steps (nanoseconds, fitted to LAPACK and numpy timings on this machine
-class; only the choice depends on it, never the numbers), so a map of long-lived objects
+class; only the choice depends on it, the numbers agree to rounding), so a map of long-lived objects
 keeps the plain path. The algebra is exact either way (docs/method.md, "Why it is fast").
 """
 
