@@ -27,12 +27,12 @@ import scipy.sparse.linalg
 from numpy.typing import NDArray
 from scipy.linalg import lapack
 
-from objslam_mapper.graph.fold import FoldPlan, folded_steps
+from objslam_mapper.graph.fold import POSE_BAND, FoldPlan, folded_steps
 from objslam_mapper.graph.fold import fold as fold_objects
 from objslam_mapper.graph.linearize import AssociationSystem, Linearization
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
 
-_BAND = 5  # upper bandwidth of the pose block: pose i couples with pose i+1 only
+_BAND = POSE_BAND
 
 
 @dataclass
