@@ -27,12 +27,11 @@ import scipy.sparse.linalg
 from numpy.typing import NDArray
 from scipy.linalg import lapack
 
+from objslam_mapper.graph.bins import bin_sum
 from objslam_mapper.graph.fold import POSE_BAND, FoldPlan, folded_steps
 from objslam_mapper.graph.fold import fold as fold_objects
 from objslam_mapper.graph.linearize import AssociationSystem, Linearization
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
-
-_BAND = POSE_BAND
 
 
 @dataclass
@@ -63,7 +62,7 @@ def _sparse_values(lin: Linearization) -> NDArray[np.float64]:
 
 @functools.lru_cache(maxsize=8)
 def _band_index(
-    n_poses: int, half_width: int = _BAND
+    n_poses: int, half_width: int = POSE_BAND
 ) -> tuple[tuple[NDArray, NDArray], NDArray, tuple[NDArray, NDArray], NDArray]:
     """Where the pose blocks go in LAPACK upper banded storage ab[half_width + i - j, j]."""
     p, a, b = np.meshgrid(np.arange(n_poses), np.arange(3), np.arange(3), indexing="ij")
@@ -149,7 +148,7 @@ def _factorize_schur(
         pose_diag[:, i3, i3] *= 1.0 + damping
         object_diag[:, i5, i5] *= 1.0 + damping
         calib_diag[np.diag_indices(nc)] *= 1.0 + damping
-    half_width = _BAND if plan is None else plan.half_width
+    half_width = POSE_BAND if plan is None else plan.half_width
     diag_at, diag_src, off_at, off_src = _band_index(n, half_width)
     band = np.zeros((half_width + 1, POSE_DIM * n))
     band[diag_at] = pose_diag.ravel()[diag_src]
@@ -172,10 +171,8 @@ def _factorize_schur(
     if plan is None:
         rhs[:, :n_object_vars] = lin.pose_object(system.layout)
     else:
-        weights = lin.cross[:, :, plan.kept_slices].ravel()
-        size = POSE_DIM * n * n_object_vars
-        rhs[:, :n_object_vars] = np.bincount(plan.kept_bins.ravel(), weights, minlength=size).reshape(
-            POSE_DIM * n, n_object_vars
+        rhs[:, :n_object_vars] = bin_sum(
+            plan.kept_bins, lin.cross[:, :, plan.kept_slices], (POSE_DIM * n, n_object_vars)
         )
     rhs[:, n_object_vars:-1] = lin.pose_calib.reshape(POSE_DIM * n, nc)
     rhs[:, -1] = grad_pose
@@ -198,12 +195,18 @@ def _factorize_schur(
         raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
     step_pose = -back[:, 0]
     step_object = step_dense[:n_object_vars]
-    if plan is not None and folded is not None:
+    if plan is not None and folded is not None:  # the folded objects' steps from the poses'; no complement kept
         steps = np.empty((system.n_objects, OBJECT_DIM))
         steps[plan.kept] = step_object.reshape(-1, OBJECT_DIM)
         steps[plan.folded] = folded_steps(plan, folded, step_pose)
-        step_object = steps.ravel()
-        return Factorization(log_det, step_pose, step_object, 0.0, step_dense[n_object_vars:], folded=True)
+        return Factorization(
+            log_det=log_det,
+            step_pose=step_pose,
+            step_object=steps.ravel(),
+            predicted_decrease=0.0,
+            step_calib=step_dense[n_object_vars:],
+            folded=True,
+        )
     return Factorization(
         log_det=log_det,
         step_pose=step_pose,

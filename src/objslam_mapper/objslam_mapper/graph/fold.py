@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from objslam_mapper.graph.bins import bin_sum
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
 
 if TYPE_CHECKING:
@@ -59,6 +60,11 @@ def _cost_ns(rows: int, half_width: int, dense: int, fold_entries: int) -> float
     )
 
 
+def _half_width(limit: int) -> int:
+    """The pose block's upper bandwidth with every object seen over at most ``limit`` poses folded."""
+    return max(POSE_BAND, POSE_DIM * limit - 1)
+
+
 def _observations(layout: Layout) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
     """Distinct (object, pose) pairs, grouped by object, poses ascending: each slice's pair,
     and each pair's object and pose."""
@@ -90,26 +96,30 @@ def fold_plan(layout: Layout) -> FoldPlan | None:
     best: int | None = None
     for limit in np.unique(span):
         fold = span <= limit
-        half_width = max(POSE_BAND, POSE_DIM * int(limit) - 1)
-        cost = _cost_ns(rows, half_width, OBJECT_DIM * int(np.count_nonzero(~fold)) + extra, int(entries[fold].sum()))
+        cost = _cost_ns(
+            rows, _half_width(int(limit)), OBJECT_DIM * int(np.count_nonzero(~fold)) + extra, int(entries[fold].sum())
+        )
         if cost < best_cost:
             best_cost, best = cost, int(limit)
-    return None if best is None else _plan(layout, best, observations)
+    return None if best is None else _plan(layout, span <= best, best, observations)
 
 
 def fold_up_to(layout: Layout, limit: int) -> FoldPlan:
     """The plan that folds every object seen over at most ``limit`` poses (of any cost)."""
-    return _plan(layout, limit, _observations(layout))
+    return _plan(layout, _spans(layout) <= limit, limit, _observations(layout))
 
 
 def _plan(
-    layout: Layout, limit: int, observations: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]
+    layout: Layout,
+    short: NDArray[np.bool_],
+    limit: int,
+    observations: tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]],
 ) -> FoldPlan:
+    """The plan folding the ``short`` objects, each seen over at most ``limit`` poses."""
     obs_of_slice, obs_object, obs_pose = observations
-    short = _spans(layout) <= limit
     folded, kept = np.flatnonzero(short), np.flatnonzero(~short)
     rows = POSE_DIM * layout.n_poses
-    half_width = max(POSE_BAND, POSE_DIM * limit - 1)
+    half_width = _half_width(limit)
     is_folded = np.zeros(layout.n_objects, dtype=bool)
     is_folded[folded] = True
     # Observations of folded objects, renumbered; their slices sorted by observation.
@@ -195,13 +205,12 @@ def fold(
     blocks = np.add.reduceat(np.moveaxis(cross[:, :, plan.slice_order], 2, 0), plan.obs_starts, axis=0)
     whitened = blocks @ np.swapaxes(inv_chol, 1, 2)[plan.obs_object]
     pairs = whitened[plan.pair_first] @ np.swapaxes(whitened[plan.pair_second], 1, 2)
-    band = np.bincount(plan.pair_bins, weights=pairs.ravel()[plan.pair_keep], minlength=(plan.half_width + 1) * rows)
     whitened_grad = np.einsum("fij,fj->fi", inv_chol, grad_object[plan.folded])
     pose_terms = np.einsum("oik,ok->oi", whitened, whitened_grad[plan.obs_object])
     grad_bins = (POSE_DIM * plan.obs_pose[:, None] + np.arange(POSE_DIM)).ravel()
     return Folded(
-        band=band.astype(float, copy=False).reshape(plan.half_width + 1, rows),
-        grad_pose=np.bincount(grad_bins, weights=pose_terms.ravel(), minlength=rows).astype(float, copy=False),
+        band=bin_sum(plan.pair_bins, pairs.ravel()[plan.pair_keep], (plan.half_width + 1, rows)),
+        grad_pose=bin_sum(grad_bins, pose_terms, (rows,)),
         log_det=log_det,
         whitened=whitened,
         inv_chol=inv_chol,

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from objslam_common.geometry import wrap_angle
+from objslam_mapper.graph.bins import bin_sum
 from objslam_mapper.graph.layout import Layout, graph_log_normalizer
 from objslam_mapper.graph.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.model.floor import floor_jacobian, floor_residual
@@ -79,7 +80,7 @@ class Linearization:
                 block = np.zeros(shape)
                 block.ravel()[layout.cross_bins.ravel()] = self.cross.ravel()
             else:
-                block = _bin_sum(layout.cross_bins, self.cross, shape)
+                block = bin_sum(layout.cross_bins, self.cross, shape)
             self._pose_object = block
         return self._pose_object
 
@@ -128,15 +129,6 @@ def count_outliers(
 
 POSE_SIGN = np.array([-1.0, -1.0, 1.0])
 OBJECT_COLUMNS = np.array([0, 1, 3, 4, 5])
-
-
-def _bin_sum(bins: NDArray[np.int64], values: NDArray[np.float64], shape: tuple[int, ...]) -> NDArray[np.float64]:
-    """Sum ``values`` into a zero array of ``shape`` at the flat positions ``bins`` (same shape as values)."""
-    size = int(np.prod(shape))
-    # bincount of an empty input is int64 whatever the weights: a graph without slices
-    # (no objects) would then get integer blocks.
-    summed = np.bincount(bins.ravel(), weights=values.ravel(), minlength=size)
-    return summed.astype(np.float64, copy=False).reshape(shape)
 
 
 class AssociationSystem:
@@ -292,11 +284,11 @@ class AssociationSystem:
         if self.n_calib:
             cost += calib_cost
 
-        pose_diag = _bin_sum(lay.pose_bins, np.einsum("kim,kjm->ijm", jac_pose, jac_pose), (n, 3, 3))
+        pose_diag = bin_sum(lay.pose_bins, np.einsum("kim,kjm->ijm", jac_pose, jac_pose), (n, 3, 3))
         pose_diag[:-1] += diag_i
         pose_diag[1:] += diag_j
         pose_diag[0] += np.diag(self.problem.first_pose_stddev**-2)
-        grad_pose += _bin_sum(lay.pose_grad_bins, np.einsum("kim,km->im", jac_pose, sl), (n, 3))
+        grad_pose += bin_sum(lay.pose_grad_bins, np.einsum("kim,km->im", jac_pose, sl), (n, 3))
         grad_pose[0] += first / self.problem.first_pose_stddev
 
         # Measurements are grouped by object: per-object sums are contiguous runs.
