@@ -87,18 +87,22 @@ def fold_plan(layout: Layout) -> FoldPlan | None:
     if not k:
         return None
     span = _spans(layout)
-    observations = _observations(layout)
-    seen = np.bincount(observations[1], minlength=k)  # poses each object is seen from
+    limits = np.unique(span)
     rows, extra = POSE_DIM * layout.n_poses, layout.n_calib + 1
-    entries = 9 * seen * (seen + 1) // 2
+    kept = [OBJECT_DIM * int(np.count_nonzero(span > limit)) + extra for limit in limits]
     # A fold must promise a fifth off: below that the model's error is the difference.
     best_cost = _WORTH * _cost_ns(rows, POSE_BAND, OBJECT_DIM * k + extra, 0)
+    # Folding only adds entries to a fold's cost: where no fold wins without them, none does,
+    # and the observations (a sort of every slice) need not be counted.
+    bounds = [_cost_ns(rows, _half_width(int(limit)), dense, 0) for limit, dense in zip(limits, kept, strict=True)]
+    if min(bounds) >= best_cost:
+        return None
+    observations = _observations(layout)
+    seen = np.bincount(observations[1], minlength=k)  # poses each object is seen from
+    entries = 9 * seen * (seen + 1) // 2
     best: int | None = None
-    for limit in np.unique(span):
-        fold = span <= limit
-        cost = _cost_ns(
-            rows, _half_width(int(limit)), OBJECT_DIM * int(np.count_nonzero(~fold)) + extra, int(entries[fold].sum())
-        )
+    for limit, dense in zip(limits, kept, strict=True):
+        cost = _cost_ns(rows, _half_width(int(limit)), dense, int(entries[span <= limit].sum()))
         if cost < best_cost:
             best_cost, best = cost, int(limit)
     return None if best is None else _plan(layout, span <= best, best, observations)
