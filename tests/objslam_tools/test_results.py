@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from objslam_tools.errors import UserError
-from objslam_tools.results import README_BEGIN, README_END, Row, Scenario, table, with_readme_table
+from objslam_tools.results import README_BEGIN, README_END, Row, Scenario, provenance, table, with_readme_table
 from tests.conftest import objslam_cmd
 
 GOOD = {
@@ -121,3 +121,21 @@ def test_chain_metrics_count_the_chains_that_agree_with_the_pooled_map():
     m = chain_metrics(built, 3)
     assert m["chains_agreeing"] == 1 and m["rhat_max"] == float("inf") and m["ess_min"] == 4.0
     assert chain_metrics(built, 0) == {"chains": None}
+
+
+def test_provenance_names_the_commit_and_ignores_the_pages_a_run_writes(tmp_path):
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "docs").mkdir()
+    for name in ("docs/chains.md", "README.md", "code.py"):
+        (tmp_path / name).write_text("one\n")
+    git("add", "-A")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "c")
+    assert "uncommitted" not in provenance(tmp_path)
+    (tmp_path / "docs/chains.md").write_text("two\n")
+    (tmp_path / "README.md").write_text("two\n")
+    assert "uncommitted" not in provenance(tmp_path)  # a page an earlier run regenerated
+    (tmp_path / "code.py").write_text("two\n")
+    assert "with uncommitted changes" in provenance(tmp_path)

@@ -293,6 +293,9 @@ def _chain_cells(m: dict[str, Any]) -> str:
     return f"{_fmt(m.get('rhat_max'), '.2f')} | {_fmt(m.get('ess_min'), '.0f')} | {agreeing} | "
 
 
+PAGES = ("docs/*.md", "README.md")  # what `objslam results` writes
+
+
 def provenance(repo: Path) -> str:
     """Which commit (and whether the tree was clean), when, and on what machine."""
 
@@ -301,7 +304,9 @@ def provenance(repo: Path) -> str:
         return done.stdout.strip()
 
     commit = git("rev-parse", "--short", "HEAD") or "unknown"
-    dirty = " with uncommitted changes" if git("status", "--porcelain", "--untracked-files=no") else ""
+    # The pages a run writes change no result: a page regenerated just before is no change.
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", ".", *(f":(exclude){p}" for p in PAGES))
+    dirty = " with uncommitted changes" if changed else ""
     when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     return f"commit `{commit}`{dirty}, {when}, on {machine}"
