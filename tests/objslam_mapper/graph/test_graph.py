@@ -22,13 +22,9 @@ from objslam_mapper.config import GraphConfig, MapperConfig, OdometryNoiseConfig
 from objslam_mapper.graph import solver as solver_module
 from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
 from objslam_mapper.graph.initialization import initial_object
-from objslam_mapper.graph.keyframes import keyframes_of
-from objslam_mapper.graph.layout import layout_of
-from objslam_mapper.graph.linearize import cap_schedule, count_outliers
-from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, read_only, with_extra_priors
+from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, with_extra_priors
 from objslam_mapper.graph.solver import solve
-from objslam_mapper.model.outliers import COLD_START_CAP_SCALES, NEAR_START_CAP_SCALES
-from objslam_mapper.model.slice_model import LOWER_BOUND, WIDTH, predict_slices, slice_error
+from objslam_mapper.model.slice_model import LOWER_BOUND, predict_slices, slice_error
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
 
@@ -336,54 +332,6 @@ def test_warm_start_converges_to_the_same_solution_faster(dense_object_limit):
     parts = solve(problem, split, warm_start=cold)
     merged = solve(problem, groups, warm_start=parts)
     assert merged.log_evidence == pytest.approx(cold.log_evidence, abs=1e-2)
-
-
-def count_outliers_at(problem, groups, solution):
-    """Slices of ``groups`` beyond their true caps at ``solution``."""
-    keyframes = keyframes_of(problem)
-    objects = np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
-    poses = keyframes.restrict(solution.map_T_base)
-    return count_outliers(keyframes.problem, layout_of(keyframes.problem, groups), poses, objects)
-
-
-@pytest.mark.parametrize("sigmas", [20.0, 40.0])
-def test_a_warm_start_at_a_solution_stays_there_despite_its_outliers(sigmas):
-    """A warm start solves at the true caps at once (model/outliers.py): the slices they hold
-    out at the solution it starts from (here every tenth slice of one object, 20 or 40 sigma
-    too wide: beyond the true cap, within 100 times it) do not pull the solve away and back
-    (graduated from 100 times the caps, it took 8 and 10 steps to the same evidence)."""
-    run, problem = make_run(3)
-    groups = run.groups(problem)
-    first = np.asarray(groups[0])
-    moved = first[::10]
-    measurements = np.array(problem.measurements)
-    measurements[moved, WIDTH] += sigmas * problem.measurement_stddev[moved, WIDTH]
-    problem = dataclasses.replace(problem, measurements=read_only(measurements))
-    cold = solve(problem, groups)
-    assert count_outliers_at(problem, groups, cold) >= 3  # held out at the solution
-    warm = solve(problem, groups, warm_start=cold)
-    assert warm.converged and warm.iterations == 1
-    assert warm.log_evidence == pytest.approx(cold.log_evidence, abs=1e-6)
-
-
-@pytest.mark.parametrize(("every", "schedule"), [(10, NEAR_START_CAP_SCALES), (3, COLD_START_CAP_SCALES)])
-def test_a_warm_start_far_from_an_objects_slices_graduates_its_caps(every, schedule):
-    """Beyond their true caps: a tenth of an object's slices leaves the warm start near (the
-    true caps at once), a third makes it start Gaussian and graduate (a loop closed by a merge)."""
-    run, problem = make_run(3)
-    groups = run.groups(problem)
-    cold = solve(problem, groups)
-    moved = np.asarray(groups[0])[::every]
-    measurements = np.array(problem.measurements)
-    measurements[moved, WIDTH] += 40.0 * problem.measurement_stddev[moved, WIDTH]
-    problem = dataclasses.replace(problem, measurements=read_only(measurements))
-    keyframes = keyframes_of(problem)
-    objects = np.array([np.r_[o.location_m, o.size_m] for o in cold.objects])
-    layout = layout_of(keyframes.problem, groups)
-    assert cap_schedule(keyframes.problem, layout, keyframes.restrict(cold.map_T_base), objects, True) == schedule
-    assert cap_schedule(keyframes.problem, layout, keyframes.restrict(cold.map_T_base), objects, False) == (
-        COLD_START_CAP_SCALES
-    )
 
 
 def test_a_warm_start_with_a_pose_inside_an_object_still_solves():

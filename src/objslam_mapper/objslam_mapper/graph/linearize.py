@@ -41,7 +41,7 @@ from objslam_mapper.graph.problem import CALIBRATION_DIM, OBJECT_DIM, POSE_DIM, 
 from objslam_mapper.model.floor import floor_jacobian, floor_residual
 from objslam_mapper.model.outliers import (
     COLD_START_CAP_SCALES,
-    NEAR_START_CAP_SCALES,
+    WARM_START_CAP_SCALES,
     WARM_START_MAX_BEYOND,
     half_chi2,
     truncate,
@@ -95,12 +95,12 @@ def cap_schedule(
 ) -> tuple[float, ...]:
     """The outlier caps' multipliers, phase by phase (objslam_mapper.model.outliers)."""
     if warm_start:
-        beyond = beyond_cap(problem, layout, poses, objects)
+        beyond = beyond_cap(problem, layout, poses, objects, WARM_START_CAP_SCALES[0])
         share = np.bincount(layout.object_of, weights=beyond, minlength=layout.n_objects) / np.maximum(
             np.bincount(layout.object_of, minlength=layout.n_objects), 1
         )
         if not len(share) or share.max() <= WARM_START_MAX_BEYOND:
-            return NEAR_START_CAP_SCALES
+            return WARM_START_CAP_SCALES
     return COLD_START_CAP_SCALES
 
 

@@ -58,26 +58,18 @@ def inlier_log_weight(probability: float) -> float:
 # true caps (objslam_mapper.graph.linearize.cap_schedule). From drifted odometry, or when
 # a move closes a loop, good slices sit far beyond their cap and the truncated cost would
 # leave them out instead of moving the poses to fit them, so a cold solve starts Gaussian
-# (no cap at all). The middle phase keeps a handful of gross outliers, which pull the
-# first phase's fit aside, from turning good slices into outliers when the true caps come:
-# jumping from no cap to the true one can leave the solve in that compromise.
+# (no cap at all); a warm start is near a solution already, and caps 100 times higher
+# (about 68 sigma) still let every slice of a loop closure pull while the slices of
+# another object's blob (thousands of sigma off) stay out of the way. The middle phase
+# keeps a handful of gross outliers, which pull the first phase's fit aside, from turning
+# good slices into outliers when the true caps come: jumping from no cap to the true one
+# can leave the solve in that compromise.
 COLD_START_CAP_SCALES = (math.inf, 10.0, 1.0)
-# A solve warm-started from a neighbouring state's MAP (the chain's next proposals) is at a
-# solution of the true caps for every object the move left alone, and near one for the
-# rest: it solves at the true caps at once. Graduating it (caps 100, 10, then 1 times)
-# walked away from that solution, where the slices the true caps hold out pull again, only
-# to walk back: 13 Gauss-Newton steps a solve on `office`, and a chain a quarter to a
-# third slower, for the same best states (docs/method.md, "Why it is fast").
-NEAR_START_CAP_SCALES = (1.0,)
-# A warm start where more than this share of some object's slices is beyond their true
-# caps is not near a solution for that object (a merge that closes a loop: half of it was
-# seen before the drift): the solve then starts Gaussian.
-WARM_START_MAX_BEYOND = 0.2
-# One object's evidence at fixed poses from a start near it (a proposal's screen,
-# objslam_mapper.graph.conditional_evidence): caps 100 times higher (about 68 sigma) first
-# still let every slice of the object pull while another object's blob (thousands of sigma
-# off) stays out of the way.
 WARM_START_CAP_SCALES = (100.0, 10.0, 1.0)
+# A warm start where more than this share of some object's slices is beyond even the
+# raised caps is no warm start for that object (a merge that closes a loop: half of it
+# was seen before the drift): the solve then starts Gaussian.
+WARM_START_MAX_BEYOND = 0.2
 
 
 def half_chi2(whitened: NDArray[np.float64]) -> NDArray[np.float64]:
