@@ -293,7 +293,8 @@ def _chain_cells(m: dict[str, Any]) -> str:
     return f"{_fmt(m.get('rhat_max'), '.2f')} | {_fmt(m.get('ess_min'), '.0f')} | {agreeing} | "
 
 
-PAGES = ("docs/*.md", "README.md")  # what `objslam results` writes
+# Documentation, which holds the pages `objslam results` writes: no change there changes a result.
+PAGES = ("docs/*.md", "README.md")
 
 
 def provenance(repo: Path) -> str:
@@ -304,7 +305,6 @@ def provenance(repo: Path) -> str:
         return done.stdout.strip()
 
     commit = git("rev-parse", "--short", "HEAD") or "unknown"
-    # The pages a run writes change no result: a page regenerated just before is no change.
     changed = git("status", "--porcelain", "--untracked-files=no", "--", ".", *(f":(exclude){p}" for p in PAGES))
     dirty = " with uncommitted changes" if changed else ""
     when = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
