@@ -27,7 +27,7 @@ from objslam_mapper.graph.error_covariance import (
 from objslam_mapper.graph.factorize import information_matrix
 from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.layout import layout_of
-from objslam_mapper.graph.linearize import AssociationSystem
+from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, build_problem
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.synthetic import ellipse_trajectory, simulate_run
@@ -245,6 +245,7 @@ def solved():
     poses = np.asarray(solution.map_T_base)
     objects = np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
     state = (poses, objects, np.asarray(solution.calibration))
+    system.cap_scale = cap_schedule(problem, layout, poses, objects, True)[-1]
     return problem, solution, system, state
 
 

@@ -22,13 +22,9 @@ from objslam_mapper.config import GraphConfig, MapperConfig, OdometryNoiseConfig
 from objslam_mapper.graph import solver as solver_module
 from objslam_mapper.graph.gtsam_backend import build_gtsam_graph
 from objslam_mapper.graph.initialization import initial_object
-from objslam_mapper.graph.keyframes import keyframes_of
-from objslam_mapper.graph.layout import layout_of
-from objslam_mapper.graph.linearize import cap_schedule
-from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, read_only, with_extra_priors
+from objslam_mapper.graph.problem import GraphError, at_view_top, build_problem, with_extra_priors
 from objslam_mapper.graph.solver import solve
-from objslam_mapper.model.outliers import COLD_START_CAP_SCALES, WARM_START_CAP_SCALES
-from objslam_mapper.model.slice_model import LOWER_BOUND, WIDTH, predict_slices, slice_error
+from objslam_mapper.model.slice_model import LOWER_BOUND, predict_slices, slice_error
 from objslam_mapper.synthetic import SyntheticObject, ellipse_trajectory, simulate_run
 from tests.objslam_mapper.graph_scenes import CATALOG, CONFIG, MOUNT, SCENE, STEP_NS, draw_scene, object_nees
 
@@ -335,62 +331,6 @@ def test_warm_start_converges_to_the_same_solution_faster(dense_object_limit):
     split = [first[::2], first[1::2], *groups[1:]]
     parts = solve(problem, split, warm_start=cold)
     merged = solve(problem, groups, warm_start=parts)
-    assert merged.log_evidence == pytest.approx(cold.log_evidence, abs=1e-2)
-
-
-def widened(problem, measurements, sigmas):
-    """``problem`` with the widths of ``measurements`` ``sigmas`` standard deviations too wide."""
-    z = np.array(problem.measurements)
-    z[measurements, WIDTH] += sigmas * problem.measurement_stddev[measurements, WIDTH]
-    return dataclasses.replace(problem, measurements=read_only(z))
-
-
-def test_a_warm_start_at_a_solution_stays_there_despite_its_outliers():
-    """The objects a move left alone keep their true caps (model/outliers.py): the slices
-    those caps hold out at the solution a warm start comes from (here every fifth slice of
-    one object, 40 sigma too wide) do not pull the solve away and back (graduated from 100
-    times the caps, it took 10 steps to the same evidence)."""
-    run, problem = make_run(3)
-    groups = run.groups(problem)
-    problem = widened(problem, np.asarray(groups[0])[::5], 40.0)
-    cold = solve(problem, groups)
-    warm = solve(problem, groups, warm_start=cold)
-    assert warm.converged and warm.iterations == 1
-    assert warm.log_evidence == pytest.approx(cold.log_evidence, abs=1e-6)
-
-
-@pytest.mark.parametrize(("every", "graduated"), [(10, True), (40, False)])
-def test_a_warm_start_graduates_the_caps_of_the_objects_a_move_changed(every, graduated):
-    """Object 0 was two objects at the warm start (a merge): with a tenth of its slices beyond
-    their true caps its caps graduate and the others' stay true; with a fortieth (at most
-    1/20 beyond) it is near enough for the true caps at once. Left alone, the same object
-    keeps its true caps whatever its outliers; a cold solve starts Gaussian."""
-    run, problem = make_run(3)
-    groups = [np.asarray(g) for g in run.groups(problem)]
-    problem = widened(problem, groups[0][::every], 40.0)
-    cold = solve(problem, groups)
-    keyframes = keyframes_of(problem)
-    layout = layout_of(keyframes.problem, groups)
-    poses = keyframes.restrict(cold.map_T_base)
-    objects = np.array([np.r_[o.location_m, o.size_m] for o in cold.objects])
-
-    def schedule(anchor_object_of):
-        return cap_schedule(keyframes.problem, layout, poses, objects, anchor_object_of)
-
-    assert schedule(None) == COLD_START_CAP_SCALES
-    assert schedule(cold.object_of_measurement) == (1.0,)
-    split = np.array(cold.object_of_measurement)
-    split[groups[0][1::2]] = len(groups)  # the anchor held object 0 as two objects
-    if not graduated:
-        assert schedule(split) == (1.0,)
-        return
-    phases = schedule(split)
-    assert len(phases) == len(WARM_START_CAP_SCALES)
-    for scales, scale in zip(phases, WARM_START_CAP_SCALES, strict=True):
-        np.testing.assert_array_equal(scales, [scale] + [1.0] * (len(groups) - 1))
-    # Merged from the two halves' solution, the solve reaches the cold solve's optimum.
-    halves = [groups[0][::2], groups[0][1::2], *groups[1:]]
-    merged = solve(problem, groups, warm_start=solve(problem, halves, warm_start=cold))
     assert merged.log_evidence == pytest.approx(cold.log_evidence, abs=1e-2)
 
 

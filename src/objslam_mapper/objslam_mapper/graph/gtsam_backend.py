@@ -81,7 +81,7 @@ from objslam_mapper.graph.solver import (
     object_error_covariance,
 )
 from objslam_mapper.model.floor import floor_jacobian, floor_residual
-from objslam_mapper.model.outliers import CapScale, truncate
+from objslam_mapper.model.outliers import truncate
 from objslam_mapper.model.slice_model import predict_reduced, whitened_slice_error
 
 logger = logging.getLogger(__name__)
@@ -335,7 +335,7 @@ def build_gtsam_graph(
 
 
 def _build(
-    problem: GraphProblem, layout: Layout, per_detection: bool, window_poses: int | None, cap_scale: CapScale = 1.0
+    problem: GraphProblem, layout: Layout, per_detection: bool, window_poses: int | None, cap_scale: float = 1.0
 ) -> tuple[gtsam.NonlinearFactorGraph, GtsamKeys]:
     keys = GtsamKeys(problem.pose_count, layout.n_objects, problem.calibration_dim)
     window = _window_size(problem.pose_count, window_poses, per_detection)
@@ -356,8 +356,7 @@ def _build(
             order = np.argsort(cell, kind="stable")
             chunks = np.split(group[order], np.flatnonzero(np.diff(cell[order])) + 1)
         for chunk in chunks:
-            scale = float(cap_scale if np.ndim(cap_scale) == 0 else cap_scale[j])  # type: ignore[index]
-            graph.add(_slice_factor(problem, chunk, keys.object(j), scale))
+            graph.add(_slice_factor(problem, chunk, keys.object(j), cap_scale))
     if problem.calibration_dim:
         sigmas = gtsam.noiseModel.Diagonal.Sigmas(np.array(problem.calibration_prior_stddev))
         graph.add(gtsam.PriorFactorVector(keys.calibration(), np.zeros(problem.calibration_dim), sigmas))
@@ -539,8 +538,7 @@ def solve_gtsam(
     # As the fast solver: graduated caps, each phase with the budget and only while a slice
     # is beyond its true cap.
     iterations = 0
-    anchor_object_of = None if warm_start is None else warm_start.object_of_measurement
-    for phase, cap_scale in enumerate(cap_schedule(problem, layout, poses, objects, anchor_object_of)):
+    for phase, cap_scale in enumerate(cap_schedule(problem, layout, poses, objects, warm_start is not None)):
         if phase and not count_outliers(problem, layout, *keys.from_values(values)):
             break
         graph, keys = _build(problem, layout, per_detection, window_poses, cap_scale)

@@ -43,8 +43,6 @@ from objslam_mapper.model.outliers import (
     COLD_START_CAP_SCALES,
     WARM_START_CAP_SCALES,
     WARM_START_MAX_BEYOND,
-    WARM_START_NEAR_BEYOND,
-    CapScale,
     half_chi2,
     truncate,
 )
@@ -93,46 +91,17 @@ class Linearization:
 
 
 def cap_schedule(
-    problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, anchor_object_of: NDArray[np.int64] | None
-) -> tuple[CapScale, ...]:
-    """The outlier caps' multipliers, phase by phase: one for every slice, or (K,) one per
-    object (objslam_mapper.model.outliers). ``anchor_object_of`` is the
-    ``object_of_measurement`` of the solution a warm start came from (None: a cold solve)."""
-    if anchor_object_of is None:
-        return COLD_START_CAP_SCALES
-    if not layout.n_objects:
-        return (1.0,)
-    if _share_per_object(layout, beyond_cap(problem, layout, poses, objects, WARM_START_CAP_SCALES[0])).max() > (
-        WARM_START_MAX_BEYOND
-    ):
-        return COLD_START_CAP_SCALES
-    near = _unchanged(layout, anchor_object_of)
-    if not near.all():
-        beyond = _share_per_object(layout, beyond_cap(problem, layout, poses, objects))
-        near |= beyond <= WARM_START_NEAR_BEYOND
-    if near.all():
-        return (1.0,)
-    if not near.any():
-        return WARM_START_CAP_SCALES
-    return tuple(np.where(near, 1.0, scale) for scale in WARM_START_CAP_SCALES)
-
-
-def _unchanged(layout: Layout, anchor_object_of: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """(K,) whether each object holds exactly the slices of one object of the anchor."""
-    owners = anchor_object_of[layout.measurements]
-    sizes = np.bincount(layout.object_of, minlength=layout.n_objects)
-    first = np.where(sizes > 0, owners[np.minimum(layout.starts, max(len(owners) - 1, 0))], -1)
-    alike = np.bincount(layout.object_of, weights=owners == first[layout.object_of], minlength=layout.n_objects)
-    anchor_sizes = np.bincount(anchor_object_of[anchor_object_of >= 0])
-    held = np.zeros(layout.n_objects, dtype=np.int64)
-    held[first >= 0] = anchor_sizes[first[first >= 0]]
-    return (first >= 0) & (alike == sizes) & (held == sizes)
-
-
-def _share_per_object(layout: Layout, flags: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """(K,) the share of each object's slices ``flags`` holds."""
-    counts = np.bincount(layout.object_of, minlength=layout.n_objects)
-    return np.bincount(layout.object_of, weights=flags, minlength=layout.n_objects) / np.maximum(counts, 1)
+    problem: GraphProblem, layout: Layout, poses: NDArray, objects: NDArray, warm_start: bool
+) -> tuple[float, ...]:
+    """The outlier caps' multipliers, phase by phase (objslam_mapper.model.outliers)."""
+    if warm_start:
+        beyond = beyond_cap(problem, layout, poses, objects, WARM_START_CAP_SCALES[0])
+        share = np.bincount(layout.object_of, weights=beyond, minlength=layout.n_objects) / np.maximum(
+            np.bincount(layout.object_of, minlength=layout.n_objects), 1
+        )
+        if not len(share) or share.max() <= WARM_START_MAX_BEYOND:
+            return WARM_START_CAP_SCALES
+    return COLD_START_CAP_SCALES
 
 
 def beyond_cap(
@@ -177,7 +146,7 @@ class AssociationSystem:
         self.bounds = problem.measurement_bounds[layout.measurements]
         self.outlier_cost = problem.measurement_outlier_cost[layout.measurements]
         self.has_outlier_model = bool(np.isfinite(self.outlier_cost).any())
-        self.cap_scale = 1.0  # the true caps, as a solve's last phase
+        self.cap_scale = 1.0  # the caps' multiplier (objslam_mapper.model.outliers; inf: every slice Gaussian)
         self.inc_inv_sigma = 1.0 / problem.increment_stddev
         self.calib_inv_sigma = 1.0 / problem.calibration_prior_stddev
         self.prior_mean = problem.prior_mean[layout.priors]
@@ -186,18 +155,6 @@ class AssociationSystem:
         self.floor_inv_sigma = 1.0 / problem.prior_floor_stddev[layout.priors]  # 0: no floor factor
         self.log_normalizer = graph_log_normalizer(problem, layout)
         self.mounts = problem.mounts(layout.measurements)
-
-    @property
-    def cap_scale(self) -> CapScale:
-        """The caps' multiplier, one or (K,) per object (objslam_mapper.model.outliers; inf: Gaussian)."""
-        return self._cap_scale
-
-    @cap_scale.setter
-    def cap_scale(self, scale: CapScale) -> None:
-        self._cap_scale = scale
-        per_slice = scale if np.ndim(scale) == 0 else np.asarray(scale)[self.layout.object_of]
-        self._slice_cap = self.outlier_cost * per_slice
-        self._capped = self.has_outlier_model and bool(np.isfinite(self._slice_cap).any())
 
     @property
     def dimension(self) -> int:
@@ -308,8 +265,8 @@ class AssociationSystem:
             return Linearization(cost=np.inf, valid=False)
         half = half_chi2(sl)
         outliers = int(np.count_nonzero(half > self.outlier_cost))
-        if self._capped:
-            within = truncate(sl, self._slice_cap, half)
+        if self.has_outlier_model and self.cap_scale < np.inf:
+            within = truncate(sl, self.outlier_cost * self.cap_scale, half)
             jac = pred.jacobian * (weight * within)[:, None, :]  # (4, 6, A); capped slices carry no information
         else:
             jac = pred.jacobian * weight[:, None, :]
@@ -364,6 +321,6 @@ class AssociationSystem:
         return self.within_caps(self.whitened_slices(poses, objects)[1])
 
     def within_caps(self, whitened: NDArray) -> NDArray[np.bool_]:
-        if not self._capped:
+        if not (self.has_outlier_model and self.cap_scale < np.inf):
             return np.ones(whitened.shape[1], dtype=bool)
-        return half_chi2(whitened) <= self._slice_cap
+        return half_chi2(whitened) <= self.outlier_cost * self.cap_scale

@@ -201,8 +201,7 @@ def solve(
     # budget; where no slice is beyond its true cap the remaining phases' costs agree with
     # the current one: they are moot. (A shared budget was tried: it cut good proposals
     # short, 60-80 nats below their optimum, and the chain then never took them.)
-    anchor_object_of = None if warm_start is None else warm_start.object_of_measurement
-    schedule = cap_schedule(problem, layout, poses, objects, anchor_object_of)
+    schedule = cap_schedule(problem, layout, poses, objects, warm_start is not None)
     graph.cap_scale = schedule[0]
     lin = graph.linearize(poses, objects, calib)
     if not lin.valid:

@@ -70,17 +70,6 @@ WARM_START_CAP_SCALES = (100.0, 10.0, 1.0)
 # raised caps is no warm start for that object (a merge that closes a loop: half of it
 # was seen before the drift): the solve then starts Gaussian.
 WARM_START_MAX_BEYOND = 0.2
-# Graduated per object in a warm start: an object the move left alone (the same slices as
-# one object of the warm start) is at its optimum, whatever its slices beyond the true
-# caps, and so is a changed one with at most this share of its slices beyond them. Their
-# caps stay true in every phase, and where every object's do the solve is one phase.
-# Raising their caps too walked the solve away from the optimum (the slices the true caps
-# hold out pull again) and back: 3 + 5 + 5 Gauss-Newton steps where one phase takes 2-6.
-# Every object at its true caps at once, whatever its share, lost good slices of changed
-# objects for good: on a long run that kept a chain 1547 nats below the mode.
-WARM_START_NEAR_BEYOND = 0.05
-
-CapScale = float | NDArray[np.float64]  # one multiplier for every slice, or (K,) one per object
 
 
 def half_chi2(whitened: NDArray[np.float64]) -> NDArray[np.float64]:

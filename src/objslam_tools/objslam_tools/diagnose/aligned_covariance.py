@@ -31,7 +31,7 @@ from objslam_mapper.config import MapperConfig
 from objslam_mapper.graph.factorize import factorize
 from objslam_mapper.graph.gauge import object_motion, trajectory_gauge
 from objslam_mapper.graph.layout import layout_of
-from objslam_mapper.graph.linearize import AssociationSystem
+from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
 from objslam_mapper.graph.solver import solve
 from objslam_tools.evaluate import align_track, nees_summary
@@ -44,6 +44,7 @@ def joint_covariance(problem, groups, solution) -> np.ndarray:
     layout = layout_of(problem, groups)
     system = AssociationSystem(problem, layout, dense_object_limit=-1)  # sparse LU: every variable
     objects = np.array([np.concatenate([o.location_m, o.size_m]) for o in solution.objects])
+    system.cap_scale = cap_schedule(problem, layout, solution.map_T_base, objects, True)[-1]
     lin = system.linearize(np.array(solution.map_T_base), objects, np.array(solution.calibration))
     factorization = factorize(system, lin, 0.0)
     return factorization.sparse_lu.solve(np.eye(system.dimension))

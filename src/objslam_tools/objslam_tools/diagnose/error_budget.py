@@ -39,7 +39,7 @@ from objslam_mapper.graph.factorize import information_matrix
 from objslam_mapper.graph.gauge import GAUGE_DIM, object_motion, trajectory_gauge
 from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.layout import layout_of
-from objslam_mapper.graph.linearize import AssociationSystem
+from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.graph.solver import GraphSolution, solve
 from objslam_tools.oracle_map import oracle_problem
@@ -76,6 +76,7 @@ def error_budget(
     poses = np.asarray(solution.map_T_base)
     objects = np.array([np.r_[o.location_m, o.size_m] for o in solution.objects])
     calib = np.asarray(solution.calibration)
+    system.cap_scale = cap_schedule(problem, layout, poses, objects, True)[-1]
     shares = problem.solver.error_covariance.bias_shares()
     kept = system.inlier_slices(poses, objects)  # the slices the MAP kept (within their caps there)
     map_information = information_matrix(system, system.linearize(poses, objects, calib))
