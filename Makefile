@@ -21,7 +21,7 @@ lint: setup
 	@$(RUN) ruff check src tests scripts && ruff format --check src tests scripts && mypy
 
 test: lint
-	@$(RUN) python -m pytest
+	@$(RUN) python -m pytest -n auto --maxprocesses 4
 
 clean:
 	rm -rf build install log .venv

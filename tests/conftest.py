@@ -1,8 +1,8 @@
 """Fixtures shared by every test package.
 
 ROS tests run nodes and ``objslam`` verbs as subprocesses over a real graph. Each test
-session gets its own ROS_DOMAIN_ID and localhost-only discovery so parallel runs (and
-other users of the machine) never see each other's topics.
+session (each pytest-xdist worker) gets its own ROS_DOMAIN_ID and localhost-only discovery
+so parallel runs (and other users of the machine) never see each other's topics.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 import time
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -36,11 +37,20 @@ def repo_root() -> Path:
 def ros_env() -> dict[str, str]:
     """Environment for ROS subprocesses: an isolated domain on localhost."""
     env = dict(os.environ)
-    env["ROS_DOMAIN_ID"] = str(100 + os.getpid() % 100)
+    env["ROS_DOMAIN_ID"] = str(ros_domain_id())
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("ROS_LOCALHOST_ONLY", None)
     return env
+
+
+def ros_domain_id() -> int:
+    """A domain in 100-199 of this session's own; under pytest-xdist (``-n N``) the workers
+    of one run take neighbouring domains, so no two of them ever share one."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID") or str(os.getpid())
+    return 100 + (zlib.crc32(run.encode()) % (100 // workers)) * workers + worker
 
 
 def objslam_cmd(*args: str) -> list[str]:

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -53,18 +54,23 @@ def _free_port() -> int:
 
 
 @pytest.fixture(scope="module")
-def ray_env() -> dict[str, str]:
-    """Token authentication as ``ray start`` turns it on, with a token of this test's own."""
+def ray_env() -> Iterator[dict[str, str]]:
+    """Token authentication as ``ray start`` turns it on, with a token of this test's own, and a
+    Ray temp dir of its own: there ``ray start`` leaves the address that a bare ``ray.init()``
+    joins, as it would on a user's machine (and the path of Ray's sockets stays short)."""
+    temp_dir = tempfile.mkdtemp(prefix="ray", dir="/tmp")
     env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
-    return {**env, "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32), "RAY_USAGE_STATS_ENABLED": "0"}
+    auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
+    try:
+        yield {**env, **auth, "RAY_TMPDIR": temp_dir, "RAY_USAGE_STATS_ENABLED": "0"}
+    finally:
+        shutil.rmtree(temp_dir, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")
 def ray_cluster(ray_env):
     """A real local Ray cluster of 2 CPUs (``ray start --head``), stopped after the tests."""
     port = _free_port()
-    # Ray's sockets live under its temp dir, whose path must stay short (AF_UNIX limit).
-    temp_dir = tempfile.mkdtemp(prefix="ray", dir="/tmp")
     ray = str(Path(sys.executable).with_name("ray"))
     head = subprocess.Popen(
         [
@@ -76,8 +82,6 @@ def ray_cluster(ray_env):
             "2",
             "--port",
             str(port),
-            "--temp-dir",
-            temp_dir,
             "--include-dashboard",
             "false",
             "--disable-usage-stats",
@@ -108,7 +112,6 @@ def ray_cluster(ray_env):
             head.kill()
         with contextlib.suppress(ProcessLookupError):
             os.killpg(head.pid, signal.SIGKILL)  # any worker left behind
-        shutil.rmtree(temp_dir, ignore_errors=True)
 
 
 def _map(tmp_path: Path, env: dict[str, str], name: str, *args: str) -> dict:
@@ -128,6 +131,10 @@ def test_two_chains_on_a_ray_cluster_give_the_map_of_one_process(ray_cluster, ra
     here = _map(tmp_path, ray_env, "here", "--chains", "2", "--params", str(inprocess))
     there = _map(tmp_path, ray_env, "there", "--chains", "2", "--ray", ray_cluster)
     assert there["content"] == here["content"]
+    # Without --ray, a local Ray of its own, though `ray start` left a cluster on this machine
+    # (which ray.init() alone would join, refusing our CPU count).
+    local = _map(tmp_path, ray_env, "local", "--chains", "2")
+    assert local["content"] == here["content"]
     assert [run["start"] for run in there["content"]["diagnostics"]["chain_runs"]] == ["heuristic", "singletons"]
     converged = there["content"]["diagnostics"]["convergence"]["converged"]
     assert f"chains: 2, converged: {'yes' if converged else 'no'} (R-hat max" in there["stdout"]
@@ -138,7 +145,8 @@ def test_two_chains_on_a_ray_cluster_give_the_map_of_one_process(ray_cluster, ra
 
 
 def test_a_cluster_that_wants_a_token_says_how_to_give_it(ray_cluster, ray_env, tmp_path):
-    env = {k: v for k, v in ray_env.items() if not k.startswith("RAY_AUTH")}
+    # Ray retries a refused token 20 times a second apart; 3 say the same.
+    env = {k: v for k, v in ray_env.items() if not k.startswith("RAY_AUTH")} | {"RAY_NUM_REDIS_GET_RETRIES": "3"}
     cmd = objslam_cmd("map", str(BAGS / "small"), "--out", str(tmp_path / "m.yaml"), "--chains", "2")
     done = subprocess.run([*cmd, "--ray", ray_cluster], capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 2 and "Traceback" not in done.stderr

@@ -31,10 +31,11 @@ def test_bench_without_a_target_is_a_usage_error():
 
 @pytest.mark.ros
 def test_bench_soak_answers_every_build_of_a_looped_bag(ros_env):
-    # One lap here, to keep the suite short (the figures of many laps are in docs/reliability.md).
+    # One lap here, to keep the suite short (the figures of many laps are in docs/reliability.md);
+    # in this test session's domain, which no other test uses meanwhile.
     result = subprocess.run(
         [sys.executable, "-m", "objslam_tools.cli", "bench", "soak", "--laps", "1", "--samples", "200",
-         "--burn-in", "50", "--json"],
+         "--burn-in", "50", "--domain-id", ros_env["ROS_DOMAIN_ID"], "--json"],
         capture_output=True, text=True, timeout=300, check=False, env=ros_env,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
@@ -49,3 +50,8 @@ def test_bench_soak_refuses_a_bad_request():
         capture_output=True, text=True, timeout=60, check=False,
     )  # fmt: skip
     assert result.returncode == 2 and "--laps must be >= 1" in result.stderr and "Traceback" not in result.stderr
+    result = subprocess.run(
+        [sys.executable, "-m", "objslam_tools.cli", "bench", "soak", "--domain-id", "300"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 2 and "--domain-id must be in 0-232" in result.stderr

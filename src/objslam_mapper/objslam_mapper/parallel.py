@@ -6,7 +6,7 @@ pure function of its task, so the map is the one :class:`~objslam_mapper.inferen
 builds, wherever the tasks ran. Which cluster: the ``--ray`` address a command was given,
 else ``parallel.ray_address``, else ``RAY_ADDRESS``, else a local Ray with
 ``parallel.workers`` CPUs (every core by default), started on first use and shut down by
-:meth:`RayRunner.close`. The tasks pin BLAS to one thread, as this process does
+:meth:`RayRunner.close`: always one of its own, never a ``ray start`` cluster that was not named. The tasks pin BLAS to one thread, as this process does
 (:mod:`objslam_common`): two chains on two cores must not fight over four threads, and the
 same sums in the same order give the same map.
 
@@ -71,7 +71,10 @@ class RayRunner:
                 if self.address:
                     ray.init(address=self.address, logging_level=logging.ERROR, log_to_driver=False)
                 else:
+                    # "local": a Ray of our own even where `ray start` left a cluster on this
+                    # machine, which a bare ray.init() would join (and refuse num_cpus).
                     ray.init(
+                        address="local",
                         num_cpus=self.workers,
                         include_dashboard=False,
                         logging_level=logging.ERROR,

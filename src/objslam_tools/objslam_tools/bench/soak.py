@@ -26,6 +26,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--laps", type=int, default=6, metavar="N", help="laps, one build each (default 6)")
     parser.add_argument("--samples", type=int, default=600, help="samples per build (default 600)")
     parser.add_argument("--burn-in", type=int, default=200, help="burn-in per build (default 200)")
+    parser.add_argument(
+        "--domain-id",
+        type=int,
+        default=None,
+        metavar="N",
+        help="ROS domain of the soak's nodes (default: one of its own in 150-229, apart from nodes already running)",
+    )
     parser.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
 
@@ -46,11 +53,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.laps < 1 or args.burn_in >= args.samples:
         raise UserError("--laps must be >= 1 and --burn-in below --samples")
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        raise UserError(f"--domain-id must be in 0-232, got {args.domain_id}")
     if not Path("/proc/self/status").exists():
         raise UserError("objslam bench soak reads memory from /proc: Linux only")
     bag = open_bag(args.bag)
     lap_s = (bag.end_ns - bag.start_ns) * 1e-9
-    env = {**os.environ, "ROS_DOMAIN_ID": str(150 + os.getpid() % 80), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    domain = args.domain_id if args.domain_id is not None else 150 + os.getpid() % 80
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     quiet = {"env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     mapper = subprocess.Popen(_cli("mapper", "--ros-args", "-p", "sampler.chains:=1"), **quiet)  # type: ignore[call-overload]
     nodes = [mapper, subprocess.Popen(_cli("detector", "--ros-args", "-p", "reliable_images:=true"), **quiet)]  # type: ignore[call-overload]
