@@ -6,9 +6,10 @@ pure function of its task, so the map is the one :class:`~objslam_mapper.inferen
 builds, wherever the tasks ran. Which cluster: the ``--ray`` address a command was given,
 else ``parallel.ray_address``, else ``RAY_ADDRESS``, else a local Ray with
 ``parallel.workers`` CPUs (every core by default), started on first use and shut down by
-:meth:`RayRunner.close`: always one of its own, never a ``ray start`` cluster that was not named. The tasks pin BLAS to one thread, as this process does
-(:mod:`objslam_common`): two chains on two cores must not fight over four threads, and the
-same sums in the same order give the same map.
+:meth:`RayRunner.close`: always one of its own, never a ``ray start`` cluster that was not
+named. The tasks pin BLAS to one thread, as this process does (:mod:`objslam_common`): two
+chains on two cores must not fight over four threads, and the same sums in the same order
+give the same map.
 
 Progress: each task reports its steps to a small Ray actor, which this process polls.
 """
