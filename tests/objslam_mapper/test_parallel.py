@@ -152,6 +152,7 @@ def test_a_cluster_that_wants_a_token_says_how_to_give_it(ray_cluster, ray_env, 
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert f"cannot start or reach the Ray cluster at {ray_cluster}" in done.stderr
     assert "set RAY_AUTH_MODE=token" in done.stderr
+    assert "detecting" not in done.stderr  # refused before the bag's images were read
     assert not (tmp_path / "m.yaml").exists()
 
 
@@ -161,4 +162,5 @@ def test_an_unreachable_cluster_is_one_clear_line(tmp_path):
     assert done.returncode == 2
     assert "Traceback" not in done.stderr
     assert "cannot reach the Ray cluster at 127.0.0.1:" in done.stderr and "ray start --head" in done.stderr
+    assert "detecting" not in done.stderr
     assert not (tmp_path / "m.yaml").exists()

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from objslam_detector.config import DetectorConfig
     from objslam_mapper.config import MapperConfig
     from objslam_mapper.map_file import write_map
-    from objslam_mapper.parallel import running_chains
+    from objslam_mapper.parallel import RayRunner, running_chains
     from objslam_tools.bag import open_bag
     from objslam_tools.mapping import (
         bag_inputs,
@@ -81,7 +81,6 @@ def run(args: argparse.Namespace) -> int:
     truth = oracle_truth(bag) if args.association == "oracle" else None
 
     detector_config = load_config(DetectorConfig, args.detector_params, "detector")
-    inputs = bag_inputs(bag, detector_config, catalog, mount=config.camera_mount)
     sampling = StderrProgress("sampling", unit="samples")
     associating = StderrProgress("associating", unit="tracklets")
 
@@ -92,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
             associating(done, total)
 
     with running_chains(config.parallel, config.sampler.chains, args.ray) as runner:
+        if args.association == "sampler" and isinstance(runner, RayRunner) and runner.address:
+            runner.ray()  # a wrong address or token fails now, not after minutes of detection
+        inputs = bag_inputs(bag, detector_config, catalog, mount=config.camera_mount)
         built = build_association_map(
             inputs, args.association, config, catalog, truth=truth, progress=progress, runner=runner
         )
