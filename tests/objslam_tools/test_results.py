@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from objslam_tools.errors import UserError
-from objslam_tools.results import README_BEGIN, README_END, Row, Scenario, provenance, table, with_readme_table
+from objslam_tools.results import README_BEGIN, README_END, Row, Scenario, page, provenance, table, with_readme_table
 from tests.conftest import objslam_cmd
 
 GOOD = {
@@ -71,8 +71,6 @@ def test_the_command_writes_a_page_that_names_its_command_and_commit(tmp_path):
 
 
 def test_a_camera_page_gives_the_seen_recall_and_says_why_rows_miss():
-    from objslam_tools.results import page
-
     seen = {**GOOD, "recall": 0.4, "recall_seen": 1.0, "seen_objects": 2}
     missing = {**seen, "precision": 0.5}
     rows = [
@@ -97,12 +95,23 @@ def test_a_camera_page_gives_the_seen_recall_and_says_why_rows_miss():
 
 def test_rows_of_several_chains_say_how_far_the_chains_agree():
     four = {**GOOD, "chains": 4, "rhat_max": 1.004, "ess_min": 812.4, "chains_agreeing": 3, "overlapping_pairs": 1}
-    rows = [Row("office", "sampler", four, 30.0), Row("office", "greedy", {**GOOD, "chains": None}, 3.0)]
+    slow = {**four, "rhat_max": 1.27, "ess_min": 12.0, "chains_agreeing": 4, "converged": False, "draws_needed": 120000}
+    stuck = {**four, "rhat_max": float("inf"), "ess_min": 4.0, "chains_agreeing": 2, "converged": False}
+    rows = [
+        Row("office", "sampler", {**four, "converged": True}, 30.0),
+        Row("twins", "sampler", slow, 40.0),
+        Row("clutter", "sampler", stuck, 50.0),
+        Row("office", "greedy", {**GOOD, "chains": None}, 3.0),
+    ]
     text = table(rows)
-    assert "| R-hat max | ESS min | chains agreeing |" in text
-    assert "| 0 | 1 | 1.00 | 812 | 3 of 4 | 6/7 | 30 |" in text  # distractors, duplicates, chains
-    assert "| 0 | 0 | - | - | - | 7/7 | 3 |" in text
+    assert "| R-hat max | ESS min | chains agreeing | draws needed |" in text
+    assert "| 0 | 1 | 1.00 | 812 | 3 of 4 | enough | 6/7 | 30 |" in text  # distractors, duplicates, chains
+    assert "| 1.27 | 12 | 4 of 4 | 120000 | 6/7 | 40 |" in text  # too few samples: how many would do
+    assert "| inf | 4 | 2 of 4 | stuck | 6/7 | 50 |" in text
+    assert "| 0 | 0 | - | - | - | - | 7/7 | 3 |" in text
+    assert "draws needed: `enough` where the chains converged" in page(rows, "objslam results", "commit `abc`")
     assert "R-hat" not in table([Row("office", "sampler", {**GOOD, "chains": 1}, 30.0)])
+    assert "draws needed" not in page([Row("office", "sampler", {**GOOD, "chains": 1}, 30.0)], "c", "o")
 
 
 def test_chain_metrics_count_the_chains_that_agree_with_the_pooled_map():
@@ -116,10 +125,11 @@ def test_chain_metrics_count_the_chains_that_agree_with_the_pooled_map():
     built = SimpleNamespace(
         objects=(identity(0.9, (1.0, 1.0, 0.6)), identity(0.7, (1.0, 0.2, 0.9))),
         rejected=(identity(0.3, (0.0, 0.1, 0.8)),),
-        diagnostics={"convergence": {"rhat_max": "inf", "ess_bulk_min": 4.0}},
+        diagnostics={"convergence": {"rhat_max": "inf", "ess_bulk_min": 4.0, "converged": False, "draws_needed": None}},
     )
     m = chain_metrics(built, 3)
     assert m["chains_agreeing"] == 1 and m["rhat_max"] == float("inf") and m["ess_min"] == 4.0
+    assert m["converged"] is False and m["draws_needed"] is None
     assert chain_metrics(built, 0) == {"chains": None}
 
 

@@ -188,8 +188,10 @@ def _scenario_rows(
 
 def chain_metrics(built: Any, chains: int) -> dict[str, Any]:
     """How many chains a map ran (None: not the sampler) and, for several, how far they agree: the
-    largest R-hat, the smallest bulk ESS, and how many chains put every identity on the side of
-    1/2 the pooled samples put it (objslam_mapper.inference.convergence)."""
+    largest R-hat, the smallest bulk ESS, how many chains put every identity on the side of 1/2
+    the pooled samples put it, whether they converged and, where they visit the same states but
+    switch between them rarely, how many kept draws per chain would do
+    (objslam_mapper.inference.convergence)."""
     if chains < 1:
         return {"chains": None}
     convergence = built.diagnostics.get("convergence") or {}
@@ -201,6 +203,8 @@ def chain_metrics(built: Any, chains: int) -> dict[str, Any]:
         "rhat_max": float(rhat) if rhat is not None else None,
         "ess_min": convergence.get("ess_bulk_min"),
         "chains_agreeing": agreeing,
+        "converged": convergence.get("converged"),
+        "draws_needed": convergence.get("draws_needed"),
     }
 
 
@@ -262,11 +266,11 @@ def table(rows: Sequence[Row]) -> str:
         + ("recall (seen) | " if cameras else "")
         + "median xy error m "
         "| diameter / height error m | ATE / odometry ATE m | distractors as objects | duplicates | "
-        + ("R-hat max | ESS min | chains agreeing | " if chains else "")
+        + ("R-hat max | ESS min | chains agreeing | draws needed | " if chains else "")
         + "targets met | time s |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|"
         + ("---|---|" if cameras else "")
-        + ("---|---|---|" if chains else ""),
+        + ("---|---|---|---|" if chains else ""),
     ]
     for row in rows:
         m = row.metrics
@@ -288,9 +292,34 @@ def table(rows: Sequence[Row]) -> str:
 
 def _chain_cells(m: dict[str, Any]) -> str:
     if (m.get("chains") or 0) < 2:
-        return "- | - | - | "
+        return "- | - | - | - | "
     agreeing = "-" if m.get("chains_agreeing") is None else f"{m['chains_agreeing']} of {m['chains']}"
-    return f"{_fmt(m.get('rhat_max'), '.2f')} | {_fmt(m.get('ess_min'), '.0f')} | {agreeing} | "
+    return f"{_fmt(m.get('rhat_max'), '.2f')} | {_fmt(m.get('ess_min'), '.0f')} | {agreeing} | {_draws_needed(m)} | "
+
+
+def _draws_needed(m: dict[str, Any]) -> str:
+    """``enough`` (converged), kept draws per chain (too few samples), or ``stuck`` (a chain holds
+    a state no other visits: more draws of the same chains need not meet); ``-``: not recorded."""
+    if m.get("converged") is True:
+        return "enough"
+    if m.get("draws_needed"):
+        return str(m["draws_needed"])
+    return "stuck" if m.get("converged") is False else "-"
+
+
+def _chains_paragraph(rows: Sequence[Row]) -> str:
+    if not any((r.metrics.get("chains") or 0) > 1 for r in rows):
+        return ""
+    return (
+        "R-hat max and ESS min: the largest rank-normalized split R-hat and the smallest bulk ESS (in draws, "
+        "all chains together) of the chains' log target, object count and every reported identity; chains "
+        "agreeing: how many chains alone would map the same identities as the pooled samples; draws needed: "
+        "`enough` where the chains converged (every R-hat <= 1.01, every identity on the same side of 1/2 in "
+        "every chain), else the kept draws per chain that would give each of those quantities a bulk ESS of "
+        "100 per chain at the mixing seen, where the chains visit the same states but switch between them "
+        "rarely, or `stuck` where a chain holds a state no other chain visits (more draws of the same chains "
+        "need not meet).\n"
+    )
 
 
 # Documentation, which holds the pages `objslam results` writes: no change there changes a result.
@@ -326,7 +355,7 @@ least-squares SE(2) fit, objects matched per class within 0.5 m.
 
 {_cameras_paragraph(rows)}Targets: {TARGETS}. {met} of {len(rows)} maps meet all {len(TARGET_NAMES)}.
 Each map ran {_chains(rows)}.
-Times are wall seconds for detection and map building on the machine named above; this
+{_chains_paragraph(rows)}Times are wall seconds for detection and map building on the machine named above; this
 kind of machine is noisy, so compare times within one run, not across runs.
 
 {table(rows)}{_misses(rows)}"""
