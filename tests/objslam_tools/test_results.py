@@ -139,13 +139,14 @@ def test_provenance_names_the_commit_and_ignores_the_pages_a_run_writes(tmp_path
 
     git("init", "-q")
     (tmp_path / "docs").mkdir()
-    for name in ("docs/chains.md", "README.md", "code.py"):
+    for name in ("docs/chains.md", "README.md", "CHANGELOG.md", "code.py"):
         (tmp_path / name).write_text("one\n")
     git("add", "-A")
     git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "c")
     assert "uncommitted" not in provenance(tmp_path)
     (tmp_path / "docs/chains.md").write_text("two\n")
     (tmp_path / "README.md").write_text("two\n")
-    assert "uncommitted" not in provenance(tmp_path)  # a page an earlier run regenerated
+    (tmp_path / "CHANGELOG.md").write_text("two\n")
+    assert "uncommitted" not in provenance(tmp_path)  # a page an earlier run regenerated, the changelog
     (tmp_path / "code.py").write_text("two\n")
     assert "with uncommitted changes" in provenance(tmp_path)

@@ -323,7 +323,7 @@ def _chains_paragraph(rows: Sequence[Row]) -> str:
 
 
 # Documentation, which holds the pages `objslam results` writes: no change there changes a result.
-PAGES = ("docs/*.md", "README.md")
+PAGES = ("docs/*.md", "README.md", "CHANGELOG.md")
 
 
 def provenance(repo: Path) -> str:
