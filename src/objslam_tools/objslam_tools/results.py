@@ -258,7 +258,7 @@ def table(rows: Sequence[Row]) -> str:
     """The results as one markdown table (with a camera column and the recall of the objects
     the camera saw when any row is not the omnidirectional camera's)."""
     cameras = any(r.camera != "omni" for r in rows)
-    chains = any((r.metrics.get("chains") or 0) > 1 for r in rows)
+    chains = any(_several_chains(r.metrics) for r in rows)
     lines = [
         "| scenario | "
         + ("camera | " if cameras else "")
@@ -290,8 +290,13 @@ def table(rows: Sequence[Row]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _several_chains(m: dict[str, Any]) -> bool:
+    """Whether a row's map pooled several chains: only then are there agreement columns to show."""
+    return (m.get("chains") or 0) > 1
+
+
 def _chain_cells(m: dict[str, Any]) -> str:
-    if (m.get("chains") or 0) < 2:
+    if not _several_chains(m):
         return "- | - | - | - | "
     agreeing = "-" if m.get("chains_agreeing") is None else f"{m['chains_agreeing']} of {m['chains']}"
     return f"{_fmt(m.get('rhat_max'), '.2f')} | {_fmt(m.get('ess_min'), '.0f')} | {agreeing} | {_draws_needed(m)} | "
@@ -308,7 +313,7 @@ def _draws_needed(m: dict[str, Any]) -> str:
 
 
 def _chains_paragraph(rows: Sequence[Row]) -> str:
-    if not any((r.metrics.get("chains") or 0) > 1 for r in rows):
+    if not any(_several_chains(r.metrics) for r in rows):
         return ""
     return (
         "R-hat max and ESS min: the largest rank-normalized split R-hat and the smallest bulk ESS (in draws, "
