@@ -462,6 +462,12 @@ class MoveConfig:
         "probability of moving two or more tracklets of an object (of three or more) to the clutter set at once",
         minimum=0.0,
     )
+    informed: float = setting(
+        0.2,
+        "probability of sending one tracklet (any) where the screen judges it fits: another object of its class, "
+        "a new object or the clutter set",
+        minimum=0.0,
+    )
     distance_scale_m: float = setting(
         1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
     )

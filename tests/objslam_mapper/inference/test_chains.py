@@ -114,8 +114,11 @@ def test_pooled_by_counts_the_map_is_algorithm_1_over_the_samples_of_all_chains(
         assert obj.existence_probability == pytest.approx(np.mean(obj.existence_by_chain), abs=1e-9)
 
 
-def test_pooled_by_target_each_distinct_kept_state_weighs_its_posterior_probability(problem, built):
-    inference = prepare(problem, CHAINS)
+def test_pooled_by_target_each_distinct_kept_state_weighs_its_posterior_probability(problem):
+    # Every state kept, starts included: after 100 steps the three chains hold one state.
+    config = dataclasses.replace(CHAINS, burn_in=0)
+    built = infer_map(problem, config)
+    inference = prepare(problem, config)
     outcomes = InProcess().run(inference.tasks)
     # Computed apart: the target of every distinct kept state, read off the chains' traces.
     value, summary = {}, {}
@@ -133,8 +136,8 @@ def test_pooled_by_target_each_distinct_kept_state_weighs_its_posterior_probabil
 
     assert keys(mine) == keys(theirs)
     for a, b in zip(mine, theirs, strict=True):
-        assert a.existence_probability == pytest.approx(b.existence_probability, abs=1e-9)
         # A state two chains kept was solved by each, warm-started apart: equal to the solver's tolerance.
+        assert a.existence_probability == pytest.approx(b.existence_probability, abs=1e-7)
         assert a.position_m == pytest.approx(b.position_m, abs=1e-4)
     assert np.allclose([p.x_m for p in built.trajectory], [p.x_m for p in pooled.trajectory], atol=1e-4)
     assert built.diagnostics["pooling"] == "target" and CHAINS.pooling == "target"

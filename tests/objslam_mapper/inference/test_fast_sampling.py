@@ -88,6 +88,7 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
         positions_xy_m=positions,
         tracklet_weights=weights,
         screen=screen,
+        guide=screen,  # informed moves, whose reverse is known only once J' is solved
         screen_config=ScreenConfig(
             margin_nats=margins[0],
             relative_margin=margins[1],

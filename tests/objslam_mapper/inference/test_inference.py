@@ -356,7 +356,11 @@ def test_two_objects_of_one_class_08_m_apart_stay_two_objects(scene):
 def test_a_poster_seen_from_a_few_poses_does_not_become_an_object():
     run = simulate()
     problem = problem_of(run, with_poster(run))
-    built = infer_map(problem, QUICK)
+    # The green object is in place once the loop closes: a red tracklet joins the object it
+    # left (+38 nats for the target, -434 for the screen at fixed poses, so only its floor
+    # lets it through, and informed moves cannot find it either). 500 steps found it for 11
+    # of 12 seeds.
+    built = infer_map(problem, dataclasses.replace(QUICK, samples=1500, burn_in=500))
     greens = [o for o in built.objects if o.label == "green"]
     plain = tracklets_of_problem(problem_of(run))
     green_slices = sum(len(t) for t in plain.tracklets if t.label == "green")

@@ -101,8 +101,38 @@ def things_by_class(labels):
     return things
 
 
+class NoisyGuide:
+    """What an informed move follows: the exact log ratio of a toy target with a fixed error
+    per ordered pair (as the screen errs), drawn on first use."""
+
+    def __init__(self, scores, error_stddev: float, seed: int):
+        self.scores, self.error_stddev = scores, error_stddev
+        self.rng = np.random.default_rng(seed)
+        self.errors: dict[tuple[Association, Association], float] = {}
+
+    def __call__(self, state: Association, new: Association) -> float:
+        if (state, new) not in self.errors:
+            self.errors[(state, new)] = self.error_stddev * self.rng.normal()
+        return self.scores[new] - self.scores[state] + self.errors[(state, new)]
+
+
+class ForgetsInformedTwin(Proposals):
+    """Broken on purpose: an informed move counts only the tracklet it moved, not the other
+    tracklet whose move reaches the same state (two singletons joined, a pair parted). Its
+    forward and reverse err alike, so the chain's frequencies barely show it; the proposal
+    check does."""
+
+    def _log_informed(self, view, t, dest):
+        return self._informed(view, t).log_prob(dest) - math.log(len(self.labels))
+
+
+def test_a_forgotten_twin_way_fails_the_proposal_check():
+    with pytest.raises(AssertionError):
+        test_proposal_probabilities_are_exact(False, False, ForgetsInformedTwin)
+
+
 @pytest.mark.parametrize(("with_sight_lines", "with_things"), [(False, False), (True, False), (False, True)])
-def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
+def test_proposal_probabilities_are_exact(with_sight_lines, with_things, proposals_cls=Proposals):
     """Every reported q(J -> J') equals its sampling frequency, and the reverse q reported
     with a move equals the forward q of the reverse move from J'."""
     labels = ["r", "r", "r", "r", "g", "g"]
@@ -115,7 +145,9 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
         tracklet_weights=weights,
         sight_lines=lines,
         clutter_things=things_by_class(labels) if with_things else None,
+        guide=NoisyGuide(scores, 1.0, seed=5),
     )
+    sampler.proposals.__class__ = proposals_cls
     rng = np.random.default_rng(0)
     draws = 400
     reported: dict[tuple[str, Association, Association], tuple[float, float]] = {}
@@ -130,11 +162,12 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
                 continue
             key = (p.kind, state, p.view.state)
             assert p.view.state != state
-            assert key not in reported or np.allclose(reported[key], (p.log_q_forward, p.log_q_reverse), atol=1e-12)
-            reported[key] = (p.log_q_forward, p.log_q_reverse)
+            log_qs = (p.log_q_forward, p.reverse_log_q())
+            assert key not in reported or np.allclose(reported[key], log_qs, atol=1e-12)
+            reported[key] = log_qs
             frequency[key] += 1
     total_q: Counter = Counter()
-    reverse_checked = 0
+    reverse_checked: Counter = Counter()
     for (kind, a, b), (log_f, log_r) in reported.items():
         q = math.exp(log_f)
         total_q[a] += q
@@ -143,8 +176,11 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things):
         reverse = reported.get((REVERSE_MOVE[kind], b, a))
         if reverse is not None:
             assert reverse[0] == pytest.approx(log_r, abs=1e-9), (kind, a, b)
-            reverse_checked += 1
-    assert reverse_checked > 0.95 * len(reported)
+            reverse_checked[kind == "informed"] += 1
+    informed = sum(kind == "informed" for kind, _, _ in reported)
+    assert reverse_checked[False] > 0.95 * (len(reported) - informed)
+    # An informed move rarely draws what the guide condemns, so fewer of its reverses are seen.
+    assert reverse_checked[True] > 0.5 * informed
     # Proposals never seen are rare: what was seen, with the stays, carries nearly all the mass, never more.
     assert all(0.9 < q + stays[a] / draws and q <= 1.0 + 1e-9 for a, q in total_q.items())
     assert {kind for kind, _, _ in reported} == set(MOVE_KINDS)
@@ -166,7 +202,7 @@ def test_proposals_respect_classes_and_clutter_switch():
 # ---- the chain against the exact distribution -------------------------------------------
 
 
-def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False, moves=None, things=False):
+def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False, moves=None, things=False, guide=False):
     states, scores, positions, weights = random_problem(labels, seed=seed, clutter=clutter)
     exact = ExactDistribution.of(states, scores.__getitem__)
     sampler = MetropolisHastings(labels, scores.__getitem__)
@@ -179,6 +215,7 @@ def run_chain(proposals_cls, labels, clutter, seed, steps, sight_lines=False, mo
         allow_clutter=clutter,
         sight_lines=lines,
         clutter_things=things_by_class(labels) if things else None,
+        guide=NoisyGuide(scores, 1.0, seed=seed + 70) if guide else None,
     )
     start = Association.of([CLUTTER] * len(labels) if clutter else range(len(labels)))
     result = sampler.run(start, steps, 1000, np.random.default_rng(100 + seed), keep_trace=False)
@@ -193,15 +230,27 @@ CASES = {
     "4+3 tracklets, no clutter": (["r", "r", "r", "r", "g", "g", "g"], False, 1, 150_000),
     "3+2 tracklets, clutter, lines of sight": (["r", "r", "r", "g", "g"], True, 2, 150_000),
     "3+2 tracklets, clutter, clutter things": (["r", "r", "r", "g", "g"], True, 1, 150_000),
+    "3+2 tracklets, clutter, informed moves": (["r", "r", "r", "g", "g"], True, 1, 150_000),
 }
+# Informed moves most of the time, so a wrong informed ratio is not washed out.
+INFORMED_MOVES = MoveConfig(merge=0.02, split=0.02, reassign=0.02, informed=1.0)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_chain_visits_states_with_their_exact_probabilities(case):
     labels, clutter, seed, steps = CASES[case]
+    informed = "informed" in case
     tv, result = run_chain(
-        Proposals, labels, clutter, seed, steps, sight_lines="lines of sight" in case, things="things" in case
+        Proposals,
+        labels,
+        clutter,
+        seed,
+        steps,
+        sight_lines="lines of sight" in case,
+        things="things" in case,
+        moves=INFORMED_MOVES if informed else None,
+        guide=informed,
     )
     assert tv < 0.05
     assert result.distinct_visited == len(enumerate_associations(labels, clutter))
@@ -277,6 +326,17 @@ class ForgetsPairGather(Proposals):
         return dataclasses.replace(proposal, log_q_reverse=wrong)
 
 
+class InformedAsIfSymmetric(Proposals):
+    """Broken on purpose: an informed move's reverse taken as probable as the move itself (the
+    guide's weights from the proposed state never computed)."""
+
+    def _propose_informed(self, view, rng):
+        proposal = super()._propose_informed(view, rng)
+        if proposal is None:
+            return None
+        return dataclasses.replace(proposal, reverse_later=lambda: proposal.log_q_forward)
+
+
 # Group moves on their own (no merge/split), so a wrong gather ratio is not washed out.
 GROUP_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve=0.3, gather=0.3)
 PAIR_MOVES = MoveConfig(merge=0.05, split=0.05, reassign=0.3, dissolve_pair=0.3, gather_pair=0.3)
@@ -307,17 +367,21 @@ INTO_MOVES = MoveConfig(
         # A factor of two on one move pair between few states: the smallest error here (0.061
         # against 0.021 unbroken, the chain's seed fixed).
         (ForgetsShedCoin, INTO_MOVES, 0.055),
+        # The guide's weights are square roots of ratios of a mild target, and a tenth of the
+        # draws ignore them: 0.048 against 0.012 unbroken (twice the steps, the seed fixed).
+        (InformedAsIfSymmetric, INFORMED_MOVES, 0.035),
     ],
 )
 def test_a_wrong_hastings_ratio_fails_the_exact_comparison(broken, moves, min_tv):
     """The exact comparison above has the power to see a wrong ratio."""
-    group = moves in (GROUP_MOVES, PAIR_MOVES, INTO_MOVES)
+    group = moves in (GROUP_MOVES, PAIR_MOVES, INTO_MOVES, INFORMED_MOVES)
     labels, clutter, seed, steps = CASES["3+2 tracklets, clutter"] if group else CASES["2+2 tracklets, clutter"]
-    things = broken is ForgetsWholeThings
-    tv, _ = run_chain(broken, labels, clutter, seed, steps, moves=moves, things=things)
+    options = {"moves": moves, "things": broken is ForgetsWholeThings, "guide": moves is INFORMED_MOVES}
+    steps *= 2 if moves is INFORMED_MOVES else 1
+    tv, _ = run_chain(broken, labels, clutter, seed, steps, **options)
     assert tv > min_tv
     if group:  # the same moves, unbroken, pass
-        assert run_chain(Proposals, labels, clutter, seed, steps, moves=moves, things=things)[0] < min(0.05, min_tv / 2)
+        assert run_chain(Proposals, labels, clutter, seed, steps, **options)[0] < min(0.05, min_tv / 2)
 
 
 # ---- the run's bookkeeping ----------------------------------------------------------------
@@ -336,7 +400,9 @@ def test_run_is_deterministic_for_a_seed_and_reports_progress():
     moves = []
     results = []
     for _ in range(2):
-        sampler = MetropolisHastings(labels, target, positions_xy_m=positions, tracklet_weights=weights)
+        sampler = MetropolisHastings(
+            labels, target, positions_xy_m=positions, tracklet_weights=weights, guide=NoisyGuide(scores, 1.0, seed=1)
+        )
         results.append(
             sampler.run(
                 states[0],

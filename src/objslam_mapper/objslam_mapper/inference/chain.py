@@ -43,7 +43,7 @@ from objslam_mapper.config import MoveConfig, ScreenConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.inference.association import CLUTTER, Association
 from objslam_mapper.inference.caches import lru, remember
-from objslam_mapper.inference.moves import ClutterThings, Proposal, Proposals
+from objslam_mapper.inference.moves import ClutterThings, Guide, Proposal, Proposals
 
 PROGRESS_MAX_STEPS = 500  # a cancelled build stops within this many steps of a chain
 
@@ -157,8 +157,9 @@ def _joined_parts(state: Association, new: Association) -> list[tuple[list[int],
 class MetropolisHastings:
     """MH sampler over associations of a fixed set of tracklets.
 
-    ``labels``, ``moves``, ``positions_xy_m``, ``tracklet_weights`` and ``allow_clutter``
-    make its :class:`~objslam_mapper.inference.moves.Proposals`. ``screen``, if given, makes
+    ``labels``, ``moves``, ``positions_xy_m``, ``tracklet_weights``, ``allow_clutter``,
+    ``sight_lines``, ``clutter_things`` and ``guide`` make its
+    :class:`~objslam_mapper.inference.moves.Proposals`. ``screen``, if given, makes
     each step a delayed-acceptance step (module docstring), loosened and floored as
     ``screen_config`` says.
     """
@@ -176,6 +177,7 @@ class MetropolisHastings:
         screen_config: ScreenConfig | None = None,
         sight_lines: ArrayLike | None = None,
         clutter_things: ClutterThings | None = None,
+        guide: Guide | None = None,
     ):
         self.proposals = Proposals(
             labels,
@@ -185,6 +187,7 @@ class MetropolisHastings:
             allow_clutter,
             sight_lines=sight_lines,
             clutter_things=clutter_things,
+            guide=guide,
         )
         self.screen = screen
         config = screen_config or ScreenConfig()
@@ -206,18 +209,24 @@ class MetropolisHastings:
         its acceptance probability, None when the screen rejected it (its target is then never
         computed), and whether it passed the screen only by the floor."""
         new = proposal.view.state
-        log_q = proposal.log_q_reverse - proposal.log_q_forward
         if self.screen is None:
-            return Acceptance(self.target(new) - log_p + log_q, False)
+            log_p_new = self.target(new)
+            if log_p_new == -math.inf:
+                return Acceptance(-math.inf, False)
+            return Acceptance(log_p_new - log_p + proposal.reverse_log_q() - proposal.log_q_forward, False)
+        # A reverse known only once J' is solved (informed moves) cannot shape the first stage:
+        # that stage then judges the screen alone, the same way in both directions.
+        log_q_screened = 0.0 if proposal.reverse_later else proposal.log_q_reverse - proposal.log_q_forward
         log_floor = self._log_floor(state, new)
-        log_first = self._first_stage(self.screen(state, new) + log_q, log_floor)
+        log_first = self._first_stage(self.screen(state, new) + log_q_screened, log_floor)
         if not (log_first >= 0.0 or math.log(rng.random()) < log_first):
             return Acceptance(None, False)
         at_floor = log_first <= log_floor
         log_p_new = self.target(new)
         if log_p_new == -math.inf:
             return Acceptance(-math.inf, at_floor)
-        log_back = self._first_stage(self.screen(new, state) - log_q, self._log_floor(new, state))
+        log_back = self._first_stage(self.screen(new, state) - log_q_screened, self._log_floor(new, state))
+        log_q = proposal.reverse_log_q() - proposal.log_q_forward
         return Acceptance(log_p_new - log_p + log_q + log_back - log_first, at_floor)
 
     def _log_floor(self, state: Association, new: Association) -> float:

@@ -142,6 +142,7 @@ def run_chain_task(task: ChainTask, progress: ChainProgress | None = None) -> Ch
         screen=screen if config.screen.enabled else None,
         screen_config=config.screen,
         clutter_things=target.clutter_things,
+        guide=screen,
     )
     result = sampler.run(
         start.state,
