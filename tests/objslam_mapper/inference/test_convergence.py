@@ -185,6 +185,20 @@ def test_chains_that_switch_rarely_say_how_many_draws_they_need():
     assert got.to_dict()["draws_needed"] == got.draws_needed
 
 
+def test_a_chain_whose_states_no_other_chain_kept_is_stuck_not_short_of_draws():
+    """Same identities, so no identity splits the chains and R-hat is finite; but the third
+    chain moves between two states of its own (as on twins seed 15: 17 nats below)."""
+    c, d = _State("c", 2), _State("d", 3)
+    runs = ([A] * 90 + [B] * 60 + [A] * 50, [B] * 70 + [A] * 130, [c] * 100 + [d] * 50 + [c] * 50)
+    outcomes = [_Outcome(t, [{"a": 10.0, "b": 9.0, "c": 0.0, "d": 0.5}[s.name] for s in t]) for t in runs]
+    same = {"a": frozenset({0}), "b": frozenset({0}), "c": frozenset({0}), "d": frozenset({0})}
+    got = chain_convergence(outcomes, _yields(outcomes, same), [0], 1.01)
+    assert got.converged is False and np.isfinite(got.rhat_max)
+    assert got.draws_needed is None
+    assert "chain 2 kept only states no other chain kept" in got.disagreements
+    assert not any("switch between them rarely" in d for d in got.disagreements)
+
+
 def test_no_count_of_draws_is_promised_to_chains_that_hold_apart_states():
     stuck = [_Outcome([A] * 200, [10.0] * 200), _Outcome([A] * 200, [10.0] * 200), _Outcome([B] * 200, [9.0] * 200)]
     got = chain_convergence(stuck, _yields(stuck, {"a": frozenset({0}), "b": frozenset({0, 1})}), [0, 1], 1.01)
