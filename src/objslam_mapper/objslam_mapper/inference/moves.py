@@ -459,9 +459,7 @@ class Proposals:
     def _move_tracklet(self, view: StateView, t: int, rng: np.random.Generator) -> tuple[StateView, int]:
         """Move t to a drawn destination: the new view and the destination key."""
         dest = self._destinations(view, t).draw(rng)
-        assignment = list(view.assignment)
-        assignment[t] = len(view.groups) if dest == _NEW else dest
-        return self._view_of(assignment), dest
+        return self._sent(view, t, dest), dest
 
     def _way_back(self, view: StateView, new: StateView, t: int) -> int:
         """The destination key, in ``new``, that returns t to where it was in ``view``."""
