@@ -463,23 +463,34 @@ class Proposals:
 
     def _way_back(self, view: StateView, new: StateView, t: int) -> int:
         """The destination key, in ``new``, that returns t to where it was in ``view``."""
+        if view.assignment[t] == CLUTTER:
+            return CLUTTER
         rest = view.others_in_object(t)
         return new.assignment[rest[0]] if rest else _NEW
 
-    def _log_reassign(self, view: StateView, t: int, dest: int) -> float:
-        """log q of the state reached by reassigning t to ``dest``, without the kind factor.
+    @staticmethod
+    def _twin_way(view: StateView, t: int, dest: int) -> tuple[int, int] | None:
+        """The other (tracklet, destination) whose move reaches the state of t sent to ``dest``.
 
         Two tracklets t, u lead to the same state in two ways: merging singletons {t} and
-        {u} (t joins u, or u joins t) and splitting {t, u} (t leaves, or u leaves); q sums
-        both. Every other reassignment reaches its state in exactly one way.
+        {u} (t joins u, or u joins t) and splitting {t, u} (t leaves, or u leaves). Every
+        other move of one tracklet (to or from clutter among them) reaches its state in
+        exactly one way: None.
         """
+        own = view.assignment[t]
+        if own == CLUTTER or dest == CLUTTER:
+            return None
+        if len(view.groups[own]) == 1 and dest != _NEW and len(view.groups[dest]) == 1:
+            return view.groups[dest][0], own
+        if len(view.groups[own]) == 2 and dest == _NEW:
+            return view.others_in_object(t)[0], _NEW
+        return None
+
+    def _log_reassign(self, view: StateView, t: int, dest: int) -> float:
+        """log q of the state reached by reassigning t to ``dest``, without the kind factor,
+        summed over both ways where two lead there (:meth:`_twin_way`)."""
         log_q = self._destinations(view, t).log_prob(dest)
-        own = view.groups[view.assignment[t]]
-        twin: tuple[int, int] | None = None
-        if len(own) == 1 and dest != _NEW and len(view.groups[dest]) == 1:
-            twin = (view.groups[dest][0], view.assignment[t])
-        elif len(own) == 2 and dest == _NEW:
-            twin = (own[0] if own[1] == t else own[1], _NEW)
+        twin = self._twin_way(view, t, dest)
         if twin is not None:
             log_q = float(np.logaddexp(log_q, self._destinations(view, twin[0]).log_prob(twin[1])))
         return log_q - math.log(len(self._movable(view)))
@@ -695,16 +706,12 @@ class Proposals:
 
     def _log_informed(self, view: StateView, t: int, dest: int) -> float:
         """log q of the state reached by sending t to ``dest``, without the kind factor: the
-        uniform draw of t among all tracklets, its destination, and the twin way to the same
-        state where there is one (as :meth:`_log_reassign` finds it)."""
+        uniform draw of t among all tracklets and its destination, summed over both ways where
+        two lead there (:meth:`_twin_way`)."""
         log_q = self._informed(view, t).log_prob(dest)
-        own = view.assignment[t]
-        if own != CLUTTER and dest not in (CLUTTER, _NEW) and len(view.groups[own]) == 1 == len(view.groups[dest]):
-            u = view.groups[dest][0]
-            log_q = float(np.logaddexp(log_q, self._informed(view, u).log_prob(own)))
-        elif own != CLUTTER and dest == _NEW and len(view.groups[own]) == 2:
-            u = view.others_in_object(t)[0]
-            log_q = float(np.logaddexp(log_q, self._informed(view, u).log_prob(_NEW)))
+        twin = self._twin_way(view, t, dest)
+        if twin is not None:
+            log_q = float(np.logaddexp(log_q, self._informed(view, twin[0]).log_prob(twin[1])))
         return log_q - math.log(len(self.labels))
 
     def _propose_informed(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
@@ -715,7 +722,7 @@ class Proposals:
         dest = choice.draw(rng)
         new = self._sent(view, t, dest)
         log_f = self._kinds(view).log_prob("informed") + self._log_informed(view, t, dest)
-        back = CLUTTER if view.assignment[t] == CLUTTER else self._way_back(view, new, t)
+        back = self._way_back(view, new, t)
 
         def reverse() -> float:
             return self._kinds(new).log_prob("informed") + self._log_informed(new, t, back)
