@@ -75,6 +75,25 @@ def test_greedy_merges_one_objects_tracklets_and_keeps_objects_2m_apart():
         assert obj.existence_probability == 1.0
 
 
+def test_greedy_gates_on_a_solve_that_stopped_short_of_convergence(monkeypatch):
+    """A stalled solve still says where the tracklet lies; skipping it had left every later
+    tracklet a new object (each later solve carried the stalled one's object along)."""
+    import dataclasses
+
+    import objslam_mapper.inference.start as start
+
+    solve = start.solve_with_backend
+
+    def stalled(*args, **kwargs):
+        return dataclasses.replace(solve(*args, **kwargs), converged=False)
+
+    monkeypatch.setattr(start, "solve_with_backend", stalled)
+    run, problem, tracklets = _scene()
+    truth = _true_objects(run, problem, tracklets)
+    state = greedy_association(problem, tracklets)
+    assert sorted(sorted(truth[t] for t in group) for group in state.groups) == [[0, 0], [1], [2]]
+
+
 def test_a_zero_gate_merges_nothing():
     _run, problem, tracklets = _scene()
     state = greedy_association(problem, tracklets, GreedyOptions(gate_probability=0.0))

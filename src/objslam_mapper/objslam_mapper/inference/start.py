@@ -268,7 +268,14 @@ def greedy_association(
                 warm_start=warm,
                 with_covariances=True,
             )
-            if solution.converged:
+            # A solve that stopped short of convergence still gates: the chain's target takes such
+            # values too. On `clutter` seed 13 the solve with tracklet 17 stalled (its
+            # evidence 1500 nats above a cold solve's); skipping it kept that tracklet's object
+            # in every later solve, each stalled too, and every later tracklet stayed an object
+            # of its own (58 objects of 117 tracklets with this rule; nearly 117 without).
+            if np.isfinite(solution.log_evidence):
+                if not solution.converged:
+                    logger.debug("greedy: the solve with tracklet %d did not converge; gating on it", t)
                 warm = solution
                 new = solution.objects[-1]
                 best_d2 = gate
@@ -278,7 +285,7 @@ def greedy_association(
                     if d2 <= best_d2:
                         best, best_d2 = j, d2
             else:
-                logger.warning("greedy: solve with tracklet %d did not converge; it stays a new object", t)
+                logger.warning("greedy: the solve with tracklet %d found no optimum; it stays a new object", t)
         if best is None:
             groups.append([t])
             frames.append(set(seen))
