@@ -468,6 +468,12 @@ class MoveConfig:
         "a new object or the clutter set",
         minimum=0.0,
     )
+    informed_group: float = setting(
+        0.1,
+        "probability of gathering a whole clutter thing into a new object, or dissolving an object into one clutter "
+        "thing, chosen where the screen judges it fits",
+        minimum=0.0,
+    )
     distance_scale_m: float = setting(
         1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
     )

@@ -71,7 +71,7 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
     from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
     from objslam_mapper.inference.chain import MetropolisHastings
     from objslam_mapper.inference.exact import ExactDistribution
-    from tests.objslam_mapper.inference.test_sampler import random_problem
+    from tests.objslam_mapper.inference.test_sampler import random_problem, things_by_class
 
     labels = ["r", "r", "g", "g"]
     states, scores, positions, weights = random_problem(labels, seed=0, clutter=True)
@@ -89,6 +89,7 @@ def test_delayed_acceptance_visits_states_with_their_exact_probabilities(screen_
         tracklet_weights=weights,
         screen=screen,
         guide=screen,  # informed moves, whose reverse is known only once J' is solved
+        clutter_things=things_by_class(labels),  # and informed group moves
         screen_config=ScreenConfig(
             margin_nats=margins[0],
             relative_margin=margins[1],

@@ -54,6 +54,14 @@ as a new object 108.
   proposed the better object in 6000 steps. The reverse probability needs the guide from
   J', hence J' solved: it is computed only once the screen let the proposal through
   (:meth:`Proposal.reverse_log_q`).
+- ``informed_group`` (its own reverse): a clutter thing (two or more tracklets,
+  :meth:`.target.AssociationTarget.clutter_things`) gathered into a new object, or an object
+  dissolved into clutter where its tracklets then are exactly one thing, each choice weighted
+  as the informed move weighs destinations. ``gather`` draws a thing uniformly, and among
+  thirty clutter things the one that is a real object is drawn about once in 600 steps: on
+  ``clutter`` seed 13 a chain from singletons ended 6000 steps with a red object seen in five
+  tracklets (263 slices) held as one distractor, the state with it gathered +8.6 nats (the
+  screen said +10), and that chain's state led the pooled map, which then lacked the object.
 
 A drawn move that cannot be made (a gather whose class has no object, a shed whose drawn
 side is one tracklet) proposes nothing: the chain stays, which leaves every ratio exact.
@@ -111,6 +119,7 @@ MOVE_KINDS = (
     "gather_into",
     "shed",
     "informed",
+    "informed_group",
 )
 REVERSE_MOVE = {
     "merge": "split",
@@ -125,6 +134,7 @@ REVERSE_MOVE = {
     "gather_into": "shed",
     "shed": "gather_into",
     "informed": "informed",
+    "informed_group": "informed_group",
 }
 CLUTTER_MOVES = (
     "to_clutter",
@@ -135,8 +145,10 @@ CLUTTER_MOVES = (
     "gather_pair",
     "gather_into",
     "shed",
+    "informed_group",
 )
 _NEW = -2  # destination key: a new object
+_GATHER, _DISSOLVE = "gather", "dissolve"  # informed group moves: a clutter thing to an object, or back
 THING_GATHER_SHARE = 0.5  # of gathers: exactly one clutter thing's tracklets (module docstring)
 # Of an informed move's destinations: the share drawn uniformly whatever the guide says, so a
 # guide that errs (the screen at fixed poses cannot see a loop close) never makes a move
@@ -188,6 +200,8 @@ class StateView:
     destinations: dict[int, _Choice] = field(default_factory=dict)  # per tracklet
     things: list[tuple[int, ...]] | None = None  # clutter things of two or more tracklets
     informed: dict[int, _Choice] = field(default_factory=dict)  # per tracklet: informed destinations
+    # Informed group moves: keys (_GATHER, thing) and (_DISSOLVE, members); None: not yet weighed.
+    informed_groups: _Choice | None = None
 
     @property
     def assignment(self) -> tuple[int, ...]:
@@ -263,6 +277,8 @@ class Proposals:
             probs.update(dict.fromkeys(CLUTTER_MOVES, 0.0))
         if guide is None:
             probs["informed"] = 0.0
+        if guide is None or clutter_things is None:
+            probs["informed_group"] = 0.0
         self.kind_weights = {k: p for k, p in probs.items() if p > 0.0}
         self._inv_two_scale2 = 0.5 / self.moves.distance_scale_m**2
         self._views: LRUCache[Association, StateView] = lru(_CACHE_SIZE)
@@ -318,6 +334,8 @@ class Proposals:
                 "gather_into": len(self._gather_seeds(view)) > 0 and bool(view.groups),
                 "shed": len(self._shedding(view)) > 0,
                 "informed": True,  # some tracklet may have nowhere to go: that draw proposes nothing
+                # A group move may have nothing to take (no object dissolves into one thing): the chain stays.
+                "informed_group": bool(self._things(view)) or len(self._shared_objects(view)) > 0,
             }
             kinds = [k for k in self.kind_weights if possible[k]]
             view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
@@ -684,19 +702,59 @@ class Proposals:
                 keys.append(_NEW)
             if self.allow_clutter and own != CLUTTER:
                 keys.append(CLUTTER)
-            probs = np.zeros(len(keys))
-            if keys:
-                assert self.guide is not None
-                half = 0.5 * np.array([self.guide(view.state, self._sent(view, t, d).state) for d in keys])
-                half = np.where(np.isnan(half), -np.inf, half)
-                if np.isfinite(half.max()):
-                    probs = np.exp(half - half.max())
-                    probs *= (1.0 - INFORMED_UNIFORM_SHARE) / probs.sum()
-                    probs += INFORMED_UNIFORM_SHARE / len(keys)
-                else:  # the guide condemns every destination: uniform
-                    probs[:] = 1.0 / len(keys)
-            view.informed[t] = _Choice(keys, probs)
+            view.informed[t] = self._guided(view, keys, lambda dest: self._sent(view, t, dest))
         return view.informed[t]
+
+    def _informed_groups(self, view: StateView) -> _Choice:
+        """What an informed group move may do here, each weighted as :meth:`_informed` weighs
+        destinations: gather a clutter thing (of two or more tracklets) into a new object, or
+        dissolve an object into clutter where its tracklets are then exactly one thing (so the
+        gather takes it back)."""
+        if view.informed_groups is None:
+            keys: list[tuple[str, tuple[int, ...]]] = [(_GATHER, thing) for thing in self._things(view)]
+            for j in self._shared_objects(view):
+                if view.groups[j] in self._things(self._grouped(view, (_DISSOLVE, view.groups[j]))):
+                    keys.append((_DISSOLVE, view.groups[j]))
+            view.informed_groups = self._guided(view, keys, lambda key: self._grouped(view, key))
+        return view.informed_groups
+
+    def _grouped(self, view: StateView, key: tuple[str, tuple[int, ...]]) -> StateView:
+        """``view``'s state after the informed group move ``key``."""
+        kind, members = key
+        assignment = list(view.assignment)
+        for t in members:
+            assignment[t] = len(view.groups) if kind == _GATHER else CLUTTER
+        return self._view_of(assignment)
+
+    def _guided(self, view: StateView, keys: list[Any], reach: Callable[[Any], StateView]) -> _Choice:
+        """``keys`` weighted by sqrt(pi(J')/pi(J)) as the guide judges the state each reaches,
+        mixed with a uniform share (INFORMED_UNIFORM_SHARE); uniform where the guide condemns all."""
+        probs = np.zeros(len(keys))
+        if keys:
+            assert self.guide is not None
+            half = 0.5 * np.array([self.guide(view.state, reach(key).state) for key in keys])
+            half = np.where(np.isnan(half), -np.inf, half)
+            if np.isfinite(half.max()):
+                probs = np.exp(half - half.max())
+                probs *= (1.0 - INFORMED_UNIFORM_SHARE) / probs.sum()
+                probs += INFORMED_UNIFORM_SHARE / len(keys)
+            else:
+                probs[:] = 1.0 / len(keys)
+        return _Choice(keys, probs)
+
+    def _propose_informed_group(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
+        choice = self._informed_groups(view)
+        if not choice:
+            return None
+        key = choice.draw(rng)
+        new = self._grouped(view, key)
+        log_f = self._kinds(view).log_prob("informed_group") + choice.log_prob(key)
+        back = (_DISSOLVE if key[0] == _GATHER else _GATHER, key[1])
+
+        def reverse() -> float:
+            return self._kinds(new).log_prob("informed_group") + self._informed_groups(new).log_prob(back)
+
+        return Proposal("informed_group", new, log_f, math.nan, reverse)
 
     def _sent(self, view: StateView, t: int, dest: int) -> StateView:
         """``view``'s state with t sent to ``dest`` (an object index, _NEW or CLUTTER)."""
