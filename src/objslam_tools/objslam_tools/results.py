@@ -322,8 +322,9 @@ def _chains_paragraph(rows: Sequence[Row]) -> str:
         "`enough` where the chains converged (every R-hat <= 1.01, every identity on the same side of 1/2 in "
         "every chain), else the kept draws per chain that would give each of those quantities a bulk ESS of "
         "100 per chain at the mixing seen, where the chains visit the same states but switch between them "
-        "rarely, or `stuck` where a chain holds a state no other chain visits (more draws of the same chains "
-        "need not meet).\n"
+        "rarely (where that ESS is reached but R-hat is not, the draws that would bring R-hat to 1.01, its "
+        "excess falling as 1/ESS), or `stuck` where a chain holds a state no other chain visits (more draws "
+        "of the same chains need not meet).\n"
     )
 
 

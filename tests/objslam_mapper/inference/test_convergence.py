@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy.special import ndtri
 from scipy.stats import rankdata
 
-from objslam_mapper.inference.convergence import chain_convergence, rhat_and_ess
+from objslam_mapper.inference.convergence import chain_convergence, draws_for_rhat, rhat_and_ess
 
 
 def _split(draws: np.ndarray) -> np.ndarray:
@@ -183,6 +183,37 @@ def test_chains_that_switch_rarely_say_how_many_draws_they_need():
     assert got.draws_needed > 200
     assert any(f"about {got.draws_needed} kept draws per chain" in d for d in got.disagreements)
     assert got.to_dict()["draws_needed"] == got.draws_needed
+
+
+def _sticky(rng, draws: int, switch: float) -> list:
+    """A chain between A and B that switches with probability ``switch`` per step."""
+    in_a, trace = rng.random() < 0.5, []
+    for _ in range(draws):
+        in_a ^= bool(rng.random() < switch)
+        trace.append(A if in_a else B)
+    return trace
+
+
+def test_chains_with_enough_ess_but_r_hat_above_the_threshold_say_how_many_draws_they_need():
+    """Four chains of one distribution with a bulk ESS just over 100 per chain: R-hat 1.017,
+    no identity split, no chain apart; short of draws for R-hat, not stuck."""
+    rng = np.random.default_rng(1)
+    outcomes = [_Outcome(t, [10.0 if s is A else 9.0 for s in t]) for t in (_sticky(rng, 2000, 0.05) for _ in range(4))]
+    got = chain_convergence(outcomes, _yields(outcomes, {"a": frozenset({0}), "b": frozenset({0})}), [0], 1.01)
+    assert got.converged is False and got.ess_min >= 400 and got.rhat_max > 1.01
+    assert got.draws_needed == draws_for_rhat(2000, got.rhat_max, 1.01) > 2000
+    assert any(f"about {got.draws_needed} kept draws per chain would bring it to 1.01" in d for d in got.disagreements)
+
+
+def test_r_hat_excess_falls_as_one_over_the_ess():
+    """What the estimate above rests on: for chains of one distribution, (R-hat^2 - 1) x bulk
+    ESS does not change with the chains' length."""
+    rng = np.random.default_rng(2)
+    products = []
+    for draws in (1000, 4000):
+        runs = [rhat_and_ess(ar1_chains(rng, 4, draws, 0.95, [0, 0, 0, 0])) for _ in range(60)]
+        products.append(np.mean([q.rhat**2 - 1 for q in runs]) * np.mean([q.ess_bulk for q in runs]))
+    assert 0.7 < products[1] / products[0] < 1.4
 
 
 def test_a_chain_whose_states_no_other_chain_kept_is_stuck_not_short_of_draws():
