@@ -57,11 +57,12 @@ as a new object 108.
 - ``informed_group`` (its own reverse): a clutter thing (two or more tracklets,
   :meth:`.target.AssociationTarget.clutter_things`) gathered into a new object, or an object
   dissolved into clutter where its tracklets then are exactly one thing, each choice weighted
-  as the informed move weighs destinations. ``gather`` draws a thing uniformly, and among
-  thirty clutter things the one that is a real object is drawn about once in 600 steps: on
-  ``clutter`` seed 13 a chain from singletons ended 6000 steps with a red object seen in five
-  tracklets (263 slices) held as one distractor, the state with it gathered +8.6 nats (the
-  screen said +10), and that chain's state led the pooled map, which then lacked the object.
+  as the informed move weighs destinations. ``gather`` draws a whole thing uniformly half
+  the time: on ``clutter`` seed 13 a chain from singletons ended 6000 steps with a red object
+  seen in five tracklets (263 slices) held as one distractor among 18 clutter things, the
+  state with it gathered +8.6 nats (the screen said +10), which ``gather`` proposed about
+  once in 1150 steps and this move proposes once in 18; that chain's state led the pooled
+  map, which then lacked the object.
 
 A drawn move that cannot be made (a gather whose class has no object, a shed whose drawn
 side is one tracklet) proposes nothing: the chain stays, which leaves every ratio exact.
