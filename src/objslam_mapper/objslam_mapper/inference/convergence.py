@@ -15,12 +15,13 @@ growing in proportion to the draws at the mixing seen. Where the ESS is there al
 R-hat is still above the threshold (on ``small``, 1.01 with a bulk ESS of 402 over four
 chains), it says how many would bring R-hat down, its excess R-hat^2 - 1 falling as 1/ESS:
 for four AR(1) chains of one distribution (R-hat^2 - 1) x bulk ESS stays near 8.5 from 500
-to 8000 draws, so at a bulk ESS of 400 the noise alone puts R-hat at about 1.01. Where a chain holds a state no other
-chain visits (an identity on the other side of 1/2, an R-hat that is infinite, or a chain none
-of whose kept states another chain kept) more draws of the same chains need not meet, and it
-is None. The last is checked on the states themselves: on ``twins`` seed 15 one chain kept two
-states 17 nats below every state of the others, with the same identities, and the estimate
-had called it short of 270000 draws.
+to 8000 draws, so at a bulk ESS of 400 the noise alone puts R-hat at about 1.01.
+
+Where a chain holds a state no other chain visits (an identity on the other side of 1/2, an
+R-hat that is infinite, or a chain none of whose kept states another chain kept) more draws
+of the same chains need not meet, and it is None. The last is checked on the states
+themselves: on ``twins`` seed 15 one chain kept two states 17 nats below every state of the
+others, with the same identities, and the estimate had called it short of 270000 draws.
 
 A quantity that is the same constant in every draw of every chain has no R-hat in ArviZ
 (0/0); the chains agree on it exactly, so it counts as 1. One that is constant within each

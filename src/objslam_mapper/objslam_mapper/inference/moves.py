@@ -336,7 +336,8 @@ class Proposals:
                 "shed": len(self._shedding(view)) > 0,
                 "informed": True,  # some tracklet may have nowhere to go: that draw proposes nothing
                 # A group move may have nothing to take (no object dissolves into one thing): the chain stays.
-                "informed_group": bool(self._things(view)) or len(self._shared_objects(view)) > 0,
+                # Shared objects first: finding the clutter things costs the target a pass.
+                "informed_group": len(self._shared_objects(view)) > 0 or bool(self._things(view)),
             }
             kinds = [k for k in self.kind_weights if possible[k]]
             view.kinds = _Choice(kinds, [self.kind_weights[k] for k in kinds])
@@ -589,8 +590,7 @@ class Proposals:
     def _propose_dissolve(self, view: StateView, rng: np.random.Generator) -> Proposal:
         dissolvable = self._shared_objects(view)
         members = view.groups[dissolvable[int(rng.integers(len(dissolvable)))]]
-        assignment = [CLUTTER if t in members else a for t, a in enumerate(view.assignment)]
-        new = self._view_of(assignment)
+        new = self._grouped(view, (_DISSOLVE, members))
         log_f = self._kinds(view).log_prob("dissolve") - math.log(len(dissolvable))
         log_r = self._kinds(new).log_prob("gather") + self._log_gather(new, members)
         return Proposal("dissolve", new, log_f, log_r)
@@ -609,10 +609,7 @@ class Proposals:
 
     def _propose_gather(self, view: StateView, rng: np.random.Generator) -> Proposal:
         members = self._draw_gather(view, rng)
-        assignment = list(view.assignment)
-        for t in members:
-            assignment[t] = len(view.groups)
-        new = self._view_of(assignment)
+        new = self._grouped(view, (_GATHER, members))
         log_f = self._kinds(view).log_prob("gather") + self._log_gather(view, members)
         log_r = self._kinds(new).log_prob("dissolve") - math.log(len(self._shared_objects(new)))
         return Proposal("gather", new, log_f, log_r)
@@ -719,8 +716,10 @@ class Proposals:
             view.informed_groups = self._guided(view, keys, lambda key: self._grouped(view, key))
         return view.informed_groups
 
-    def _grouped(self, view: StateView, key: tuple[str, tuple[int, ...]]) -> StateView:
-        """``view``'s state after the informed group move ``key``."""
+    def _grouped(self, view: StateView, key: tuple[str, Sequence[int]]) -> StateView:
+        """``view``'s state with the tracklets of ``key`` gathered into a new object (_GATHER)
+        or dissolved into clutter (_DISSOLVE): what gather, dissolve and the informed group
+        move make."""
         kind, members = key
         assignment = list(view.assignment)
         for t in members:
