@@ -474,6 +474,24 @@ class MoveConfig:
         "thing, chosen where the screen judges it fits",
         minimum=0.0,
     )
+    balanced: float = setting(
+        0.2,
+        "probability of sending one tracklet where the screen judges it fits, the tracklet chosen by the screen "
+        "too (among all tracklets and their destinations)",
+        minimum=0.0,
+    )
+    balanced_max_weight: float = setting(
+        5.0,
+        "the balanced move takes tracklets of at most this many slices (each costs a screen per destination; a "
+        "longer tracklet's place is rarely in doubt)",
+        minimum=0.0,
+    )
+    balanced_objects: int = setting(
+        3,
+        "the balanced move weighs, for each tracklet, this many nearest objects of its class (and a new object and "
+        "the clutter set)",
+        minimum=1,
+    )
     distance_scale_m: float = setting(
         1.0, "merges and reassignments prefer objects within about this distance (m)", minimum=1e-3
     )

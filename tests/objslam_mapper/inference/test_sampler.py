@@ -83,6 +83,8 @@ def test_measurement_groups_follow_objects():
 
 # ---- proposals ---------------------------------------------------------------------------
 
+GUIDED = ("informed", "informed_group", "balanced")  # the moves whose weights the guide sets
+
 
 def random_sight_lines(n: int, seed: int, span_m: float = 6.0):
     rng = np.random.default_rng(seed)
@@ -128,7 +130,7 @@ class ForgetsInformedTwin(Proposals):
 
 def test_a_forgotten_twin_way_fails_the_proposal_check():
     with pytest.raises(AssertionError):
-        test_proposal_probabilities_are_exact(False, False, ForgetsInformedTwin)
+        test_proposal_probabilities_are_exact(False, False, None, ForgetsInformedTwin)
 
 
 class InformedGroupAsIfSymmetric(Proposals):
@@ -146,19 +148,40 @@ class InformedGroupAsIfSymmetric(Proposals):
 
 def test_an_informed_group_move_taken_as_symmetric_fails_the_proposal_check():
     with pytest.raises(AssertionError, match="informed_group"):
-        test_proposal_probabilities_are_exact(False, True, InformedGroupAsIfSymmetric)
+        test_proposal_probabilities_are_exact(False, True, None, InformedGroupAsIfSymmetric)
 
 
-@pytest.mark.parametrize(("with_sight_lines", "with_things"), [(False, False), (True, False), (False, True)])
-def test_proposal_probabilities_are_exact(with_sight_lines, with_things, proposals_cls=Proposals):
+class BalancedAsIfSymmetric(Proposals):
+    """Broken on purpose: a balanced move's reverse taken as probable as the move itself (as
+    if the guide judged both ways alike)."""
+
+    def _propose_balanced(self, view, rng):
+        proposal = super()._propose_balanced(view, rng)
+        if proposal is None:
+            return None
+        return dataclasses.replace(proposal, reverse_later=lambda: proposal.log_q_forward)
+
+
+def test_a_balanced_move_taken_as_symmetric_fails_the_proposal_check():
+    with pytest.raises(AssertionError, match="balanced"):
+        test_proposal_probabilities_are_exact(False, False, None, BalancedAsIfSymmetric)
+
+
+@pytest.mark.parametrize(
+    ("with_sight_lines", "with_things", "moves"),
+    [(False, False, None), (True, False, None), (False, True, None), (False, False, MoveConfig(balanced_objects=1))],
+)
+def test_proposal_probabilities_are_exact(with_sight_lines, with_things, moves, proposals_cls=Proposals):
     """Every reported q(J -> J') equals its sampling frequency, and the reverse q reported
-    with a move equals the forward q of the reverse move from J'."""
+    with a move equals the forward q of the reverse move from J' (with the balanced move
+    weighing only the nearest object too, where a way back can be missing)."""
     labels = ["r", "r", "r", "r", "g", "g"]
     states, scores, positions, weights = random_problem(labels, seed=3, span_m=4.0)
     lines = random_sight_lines(len(labels), seed=4, span_m=4.0) if with_sight_lines else None
     sampler = MetropolisHastings(
         labels,
         scores.__getitem__,
+        moves,
         positions_xy_m=positions,
         tracklet_weights=weights,
         sight_lines=lines,
@@ -167,7 +190,7 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things, proposa
     )
     sampler.proposals.__class__ = proposals_cls
     rng = np.random.default_rng(0)
-    draws = 400
+    draws = 450  # enough that nearly every non-guided move's reverse is drawn too
     reported: dict[tuple[str, Association, Association], tuple[float, float]] = {}
     frequency: Counter = Counter()
     stays: Counter = Counter()  # drawn moves that cannot be made: the chain stays
@@ -194,15 +217,47 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things, proposa
         reverse = reported.get((REVERSE_MOVE[kind], b, a))
         if reverse is not None:
             assert reverse[0] == pytest.approx(log_r, abs=1e-9), (kind, a, b)
-            reverse_checked[kind.startswith("informed")] += 1
-    informed = sum(kind.startswith("informed") for kind, _, _ in reported)
+            reverse_checked[kind in GUIDED] += 1
+    informed = sum(kind in GUIDED for kind, _, _ in reported)
     assert reverse_checked[False] > 0.95 * (len(reported) - informed)
-    # An informed move rarely draws what the guide condemns, so fewer of its reverses are seen.
+    # A guided move rarely draws what the guide condemns, so fewer of its reverses are seen.
     assert reverse_checked[True] > 0.5 * informed
     # Proposals never seen are rare: what was seen, with the stays, carries nearly all the mass, never more.
     assert all(0.9 < q + stays[a] / draws and q <= 1.0 + 1e-9 for a, q in total_q.items())
     # Informed group moves take whole clutter things: without them there is nothing to take.
     assert {kind for kind, _, _ in reported} == set(MOVE_KINDS) - (set() if with_things else {"informed_group"})
+
+
+def _placement_of_others(state: Association, moved: set[int]) -> set[tuple[int, ...]]:
+    """The state's objects and clutter set seen without the tracklets ``moved``."""
+    parts = {tuple(t for t in g if t not in moved) for g in state.groups}
+    parts.add(("clutter", *(t for t in state.clutter if t not in moved)))
+    return parts - {()}
+
+
+def test_a_balanced_move_takes_only_short_tracklets():
+    labels = ["r", "r", "r", "g", "g", "g"]
+    weights = [2, 40, 3, 50, 4, 60]  # slices: 0, 2, 4 short, the others long
+    states, scores, positions, _ = random_problem(labels, seed=6)
+    proposals = Proposals(
+        labels,
+        MoveConfig(balanced_max_weight=10.0),
+        positions_xy_m=positions,
+        tracklet_weights=weights,
+        guide=NoisyGuide(scores, 1.0, seed=7),
+    )
+    short, rng = {0, 2, 4}, np.random.default_rng(8)
+    moved_long = Counter()
+    for state in states[::7]:
+        view = proposals.view(state)
+        for _ in range(20):
+            p = proposals._propose_balanced(view, rng)
+            if p is None:
+                continue
+            # Without the short tracklets the state is unchanged: only one of them moved.
+            assert _placement_of_others(p.view.state, short) == _placement_of_others(state, short)
+            moved_long[_placement_of_others(p.view.state, set()) != _placement_of_others(state, set())] += 1
+    assert moved_long[True] > 100  # and they did move
 
 
 def test_proposals_respect_classes_and_clutter_switch():
@@ -251,13 +306,22 @@ CASES = {
     "3+2 tracklets, clutter, clutter things": (["r", "r", "r", "g", "g"], True, 1, 150_000),
     "3+2 tracklets, clutter, informed moves": (["r", "r", "r", "g", "g"], True, 1, 150_000),
     "3+2 tracklets, clutter, clutter things, informed group moves": (["r", "r", "r", "g", "g"], True, 1, 150_000),
+    "3+2 tracklets, clutter, balanced moves": (["r", "r", "r", "g", "g"], True, 1, 150_000),
+    "3+2 tracklets, clutter, balanced moves to the nearest object": (["r", "r", "r", "g", "g"], True, 1, 150_000),
 }
 # Informed moves most of the time, so a wrong informed ratio is not washed out.
 INFORMED_MOVES = MoveConfig(merge=0.02, split=0.02, reassign=0.02, informed=1.0)
 INFORMED_GROUP_MOVES = MoveConfig(merge=0.02, split=0.02, reassign=0.02, informed=0.0, informed_group=1.0)
 
 
+BALANCED_MOVES = MoveConfig(merge=0.02, split=0.02, reassign=0.02, informed=0.0, balanced=1.0)
+
+
 def moves_of(case: str) -> MoveConfig | None:
+    if "nearest object" in case:
+        return dataclasses.replace(BALANCED_MOVES, balanced_objects=1)
+    if "balanced" in case:
+        return BALANCED_MOVES
     if "informed group" in case:
         return INFORMED_GROUP_MOVES
     return INFORMED_MOVES if "informed" in case else None
@@ -276,7 +340,7 @@ def test_chain_visits_states_with_their_exact_probabilities(case):
         sight_lines="lines of sight" in case,
         things="things" in case,
         moves=moves_of(case),
-        guide="informed" in case,
+        guide="informed" in case or "balanced" in case,
     )
     assert tv < 0.05
     assert result.distinct_visited == len(enumerate_associations(labels, clutter))
