@@ -476,8 +476,8 @@ class MoveConfig:
     )
     balanced: float = setting(
         0.2,
-        "probability of sending one tracklet where the screen judges it fits, the tracklet chosen by the screen "
-        "too (among all tracklets and their destinations)",
+        "probability of sending one short tracklet where the screen judges it fits, the tracklet chosen by the "
+        "screen too (among every short tracklet's nearest objects, a new object and the clutter set)",
         minimum=0.0,
     )
     balanced_max_weight: float = setting(
