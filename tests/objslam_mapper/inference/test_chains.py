@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -120,15 +121,20 @@ def test_pooled_by_target_each_distinct_kept_state_weighs_its_posterior_probabil
     built = infer_map(problem, config)
     inference = prepare(problem, config)
     outcomes = InProcess().run(inference.tasks)
-    # Computed apart: the target of every distinct kept state, read off the chains' traces.
-    value, summary = {}, {}
+    # Computed apart: the target of every distinct kept state, read off each chain's trace. A
+    # state several chains kept was solved by each (warm-started apart, equal to the solver's
+    # tolerance): each chain's solution of it carries an equal share of its weight.
+    value, kept = {}, []
     for outcome in outcomes:
         for state, log_p in zip(outcome.result.trace, outcome.result.log_targets, strict=True):
-            value[state] = log_p
-        for state, s in zip(outcome.result.counts, outcome.summaries, strict=True):
-            summary.setdefault(state, s)
-    top = max(value[s] for s in summary)
-    pooled = _algorithm_1(problem, [(summary[s], float(np.exp(value[s] - top))) for s in summary])
+            value[(outcome.spec.index, state)] = log_p
+        pairs = zip(outcome.result.counts, outcome.summaries, strict=True)
+        kept += [(outcome.spec.index, state, s) for state, s in pairs]
+    holders = Counter(state for _, state, _ in kept)
+    top = max(value[(chain, state)] for chain, state, _ in kept)
+    pooled = _algorithm_1(
+        problem, [(s, float(np.exp(value[(chain, state)] - top)) / holders[state]) for chain, state, s in kept]
+    )
     mine, theirs = _plain(built), [*pooled.objects, *pooled.rejected]
 
     def keys(objects):
@@ -136,12 +142,11 @@ def test_pooled_by_target_each_distinct_kept_state_weighs_its_posterior_probabil
 
     assert keys(mine) == keys(theirs)
     for a, b in zip(mine, theirs, strict=True):
-        # A state two chains kept was solved by each, warm-started apart: equal to the solver's tolerance.
-        assert a.existence_probability == pytest.approx(b.existence_probability, abs=1e-7)
-        assert a.position_m == pytest.approx(b.position_m, abs=1e-4)
-    assert np.allclose([p.x_m for p in built.trajectory], [p.x_m for p in pooled.trajectory], atol=1e-4)
+        assert a.existence_probability == pytest.approx(b.existence_probability, abs=1e-12)
+        assert a.position_m == pytest.approx(b.position_m, abs=1e-9)
+    assert np.allclose([p.x_m for p in built.trajectory], [p.x_m for p in pooled.trajectory], atol=1e-9)
     assert built.diagnostics["pooling"] == "target" and CHAINS.pooling == "target"
-    assert len(summary) > 1  # the chains kept more than one state: the weights had work to do
+    assert len(holders) > 1  # the chains kept more than one state: the weights had work to do
 
 
 def test_the_map_file_records_each_chain(built):
