@@ -133,6 +133,13 @@ def test_a_forgotten_twin_way_fails_the_proposal_check():
         test_proposal_probabilities_are_exact(False, False, None, ForgetsInformedTwin)
 
 
+def as_if_symmetric(proposal):
+    """A guided proposal broken on purpose: its reverse taken as probable as the move itself."""
+    if proposal is None:
+        return None
+    return dataclasses.replace(proposal, reverse_later=lambda: proposal.log_q_forward)
+
+
 class InformedGroupAsIfSymmetric(Proposals):
     """Broken on purpose: an informed group move's reverse taken as probable as the move itself.
     On the enumerated problems the chain's frequencies barely show it (total variation 0.034
@@ -140,10 +147,7 @@ class InformedGroupAsIfSymmetric(Proposals):
     take there); the proposal check does."""
 
     def _propose_informed_group(self, view, rng):
-        proposal = super()._propose_informed_group(view, rng)
-        if proposal is None:
-            return None
-        return dataclasses.replace(proposal, reverse_later=lambda: proposal.log_q_forward)
+        return as_if_symmetric(super()._propose_informed_group(view, rng))
 
 
 def test_an_informed_group_move_taken_as_symmetric_fails_the_proposal_check():
@@ -156,10 +160,7 @@ class BalancedAsIfSymmetric(Proposals):
     if the guide judged both ways alike)."""
 
     def _propose_balanced(self, view, rng):
-        proposal = super()._propose_balanced(view, rng)
-        if proposal is None:
-            return None
-        return dataclasses.replace(proposal, reverse_later=lambda: proposal.log_q_forward)
+        return as_if_symmetric(super()._propose_balanced(view, rng))
 
 
 def test_a_balanced_move_taken_as_symmetric_fails_the_proposal_check():
