@@ -89,6 +89,9 @@ def test_row_leverages_are_the_diagonal_of_the_hat_matrix(seed, rows, width):
     inverse = spread @ spread.T + np.eye(n)
     dense = jacobian.toarray()
     np.testing.assert_allclose(row_leverages(jacobian, inverse), np.diag(dense @ inverse @ dense.T), rtol=1e-10)
+    # As LAPACK's potri leaves it: the upper triangle, anything below.
+    upper = np.triu(inverse) + np.tril(rng.standard_normal((n, n)), -1)
+    np.testing.assert_array_equal(row_leverages(jacobian, upper), row_leverages(jacobian, inverse))
 
 
 @settings(max_examples=10, deadline=None)
@@ -190,6 +193,8 @@ def test_a_prior_counts_the_spread_of_the_truth_about_its_mean():
     tolerance = {"rtol": 0.15, "atol": 0.03 * np.abs(scatter).max()}
     counted = error_covariance(information, groups_of([jac], [residual]), rows, scale)
     np.testing.assert_allclose(counted.covariance, scatter, **tolerance)
+    as_sparse = error_covariance(scipy.sparse.csc_matrix(information), groups_of([jac], [residual]), rows, scale)
+    np.testing.assert_allclose(as_sparse.covariance, counted.covariance, rtol=1e-12)
     as_stated = error_covariance(information, groups_of([jac], [residual]), rows)
     ones = error_covariance(information, groups_of([jac], [residual]), rows, np.ones(n_state))
     np.testing.assert_allclose(as_stated.covariance, ones.covariance)
@@ -206,6 +211,8 @@ def test_an_object_whose_residuals_show_a_large_bias_gets_it():
     residual = noise - jac @ (inverse @ (jac.T @ noise))
     group = NoiseGroup("g", scipy.sparse.csr_matrix(jac), residual, owner, 0.1)
     shares = bias_shares(group, inverse, white_weights(group, inverse))
+    upper = np.triu(inverse) + np.tril(np.full_like(inverse, np.nan), -1)  # potri's: the upper triangle read
+    np.testing.assert_allclose(bias_shares(group, upper, white_weights(group, upper)), shares, rtol=1e-12)
     assert shares[5] == pytest.approx(2.0, rel=0.3)  # the part the state took up is put back
     assert np.all(shares >= 0.1)
     assert np.sum(np.delete(shares, 5) == 0.1) >= 6  # the others keep the configured share (but for chance)

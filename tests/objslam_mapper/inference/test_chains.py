@@ -171,3 +171,37 @@ def test_a_chain_task_is_a_pure_function_of_its_task(problem):
     first, second = (run_chain_task(inference.tasks[1]) for _ in range(2))
     assert first.result.counts == second.result.counts and first.start == second.start
     assert first.result.log_targets == second.result.log_targets
+
+
+def test_states_of_nil_weight_are_summarized_without_error_covariances_and_the_map_is_unchanged(problem, monkeypatch):
+    import objslam_mapper.inference.chains as chains_module
+
+    config = dataclasses.replace(CHAINS, burn_in=0)  # the starts kept: states far below the best
+    task = prepare(problem, config).tasks[1]
+    light, nil_nats = run_chain_task(task), chains_module.NEGLIGIBLE_NATS
+    monkeypatch.setattr(chains_module, "NEGLIGIBLE_NATS", np.inf)
+    full = run_chain_task(task)
+    assert light.result.counts == full.result.counts
+    values = light.kept_log_targets()
+    negligible = [v < max(values) - nil_nats for v in values]
+    assert any(negligible) and not all(negligible)
+    for nil, summary, reference in zip(negligible, light.summaries, full.summaries, strict=True):
+        assert all((o.error_cov is None) == nil for o in summary.objects)
+        assert all(o.error_cov is not None for o in reference.objects)
+        for a, b in zip(summary.objects, reference.objects, strict=True):
+            np.testing.assert_array_equal(a.location_cov, b.location_cov)
+    stamps = problem.stamps_ns
+    mine = build_from_samples(chains_module.pooled_samples([light], "target"), stamps)
+    theirs = build_from_samples(chains_module.pooled_samples([full], "target"), stamps)
+    assert [(o.id, o.label, o.measurement_count) for o in mine.objects] == [
+        (o.id, o.label, o.measurement_count) for o in theirs.objects
+    ]
+    for a, b in zip((*mine.objects, *mine.rejected), (*theirs.objects, *theirs.rejected), strict=True):
+        assert a.existence_probability == b.existence_probability
+        np.testing.assert_allclose(a.position_covariance, b.position_covariance, rtol=1e-12, atol=0.0)
+
+
+def test_pooled_by_counts_every_kept_state_has_its_error_covariances(problem):
+    config = dataclasses.replace(CHAINS, burn_in=0, pooling="counts")
+    outcome = run_chain_task(prepare(problem, config).tasks[1])
+    assert all(o.error_cov is not None for s in outcome.summaries for o in s.objects)

@@ -261,6 +261,42 @@ def test_a_balanced_move_takes_only_short_tracklets():
     assert moved_long[True] > 100  # and they did move
 
 
+@pytest.mark.parametrize("screened", [False, True])
+def test_a_balanced_move_without_a_way_back_is_refused_before_its_target_is_computed(screened):
+    labels = ["r", "r", "r", "r", "g", "g"]
+    states, scores, positions, weights = random_problem(labels, seed=3, span_m=4.0)
+    computed = []
+
+    def target(state):
+        computed.append(state)
+        return scores[state]
+
+    sampler = MetropolisHastings(
+        labels,
+        target,
+        MoveConfig(balanced_objects=1),  # the nearest object only: some moves have no way back
+        positions_xy_m=positions,
+        tracklet_weights=weights,
+        guide=NoisyGuide(scores, 1.0, seed=5),
+        screen=(lambda state, new: math.inf) if screened else None,  # a screen that lets every move through
+    )
+    rng = np.random.default_rng(0)
+    refused = 0
+    for state in states[::3]:
+        view = sampler.proposals.view(state)
+        for _ in range(30):
+            p = sampler.proposals._propose_balanced(view, rng)
+            if p is None:
+                continue
+            assert p.reversible() == (p.reverse_log_q() > -math.inf)
+            if not p.reversible():
+                computed.clear()
+                assert sampler._log_acceptance(state, scores[state], p, rng).log_alpha == -math.inf
+                assert p.view.state not in computed
+                refused += 1
+    assert refused > 0
+
+
 def test_proposals_respect_classes_and_clutter_switch():
     labels = ["r", "g", "r", "g", "r"]
     states, scores, positions, _ = random_problem(labels, seed=1, clutter=False)

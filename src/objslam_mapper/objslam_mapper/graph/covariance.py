@@ -10,7 +10,7 @@ import scipy.sparse
 from numpy.typing import NDArray
 
 from objslam_mapper.graph.error_covariance import ErrorCovariance, NoiseGroup, error_covariance
-from objslam_mapper.graph.factorize import Factorization, dense_inverse_columns, information_matrix, solve_pose_rhs
+from objslam_mapper.graph.factorize import Factorization, dense_inverse_columns, solve_pose_rhs, sparse_information
 from objslam_mapper.graph.gauge import GAUGE_DIM, about_trajectory, object_motion, trajectory_gauge
 from objslam_mapper.graph.linearize import OBJECT_COLUMNS, POSE_SIGN, AssociationSystem, Linearization
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
@@ -69,7 +69,7 @@ def object_error_covariance_about_trajectory(
         motion = object_motion(objects[:, :2], gauge.centroid_xy, OBJECT_DIM).reshape(-1, GAUGE_DIM)
         rows[:, :split] -= motion @ gauge.rows
     groups = noise_groups(system, poses, objects, calib, object_bias_share)
-    result = error_covariance(information_matrix(system, lin), groups, rows, prior_scale(system))
+    result = error_covariance(sparse_information(system, lin), groups, rows, prior_scale(system))
     diagonal = np.arange(k)
 
     def blocks(cov: NDArray) -> NDArray:

@@ -87,7 +87,11 @@ class ErrorCovariance(NamedTuple):
 
 
 def row_leverages(jacobian: scipy.sparse.csr_matrix, inverse: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``diag(J Λ⁻¹ Jᵀ)`` of a Jacobian with the same number of entries in every row."""
+    """``diag(J Λ⁻¹ Jᵀ)`` of a Jacobian with the same number of entries in every row.
+
+    ``inverse`` may hold ``Λ⁻¹`` in its upper triangle only (LAPACK's ``potri``): every
+    entry is read there, at (min, max) of its row and column.
+    """
     m = jacobian.shape[0]
     if m == 0:
         return np.zeros(0)
@@ -96,7 +100,8 @@ def row_leverages(jacobian: scipy.sparse.csr_matrix, inverse: NDArray[np.float64
         raise ValueError("row_leverages needs the same number of entries in every row")
     columns = jacobian.indices.reshape(m, width)
     values = jacobian.data.reshape(m, width)
-    block = inverse[columns[:, :, None], columns[:, None, :]]
+    first, second = columns[:, :, None], columns[:, None, :]
+    block = inverse[np.minimum(first, second), np.maximum(first, second)]
     return np.einsum("ma,mab,mb->m", values, block, values)
 
 
@@ -133,6 +138,8 @@ def _owners(group: NoiseGroup) -> NDArray[np.int64]:
 def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
     """(G,) each object's bias share: the configured one, or more where its own residuals show more.
 
+    ``inverse``: ``Λ⁻¹``, its upper triangle read (:func:`row_leverages`).
+
     A bias ``b`` on object ``j``'s rows leaves ``v_j b`` in the mean of its residuals, where
     ``v_j = 1 - g_jᵀ Λ⁻¹ g_j / n_j`` (``g_j = J_jᵀ 1``) is the part the state does not take
     up; the white noise adds its mean weight over ``n_j``. So ``(r̄_j² - w̄_j / n_j) / v_j²``
@@ -152,7 +159,9 @@ def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArra
     mean = np.bincount(owner, weights=group.residual, minlength=owners) / count
     white = np.bincount(owner, weights=weights, minlength=owners) / count
     totals = (owner_rows(group, np.ones(len(group.residual))) @ group.jacobian).toarray()  # g_j
-    visible = np.clip(1.0 - np.sum((totals @ inverse) * totals, axis=1) / count, MIN_VISIBLE, 1.0)
+    solved = scipy.linalg.blas.dsymm(1.0, inverse, totals.T, lower=0)  # Λ⁻¹ g_j, its upper triangle read
+    taken = np.sum(solved.T * totals, axis=1)  # g_jᵀ Λ⁻¹ g_j
+    visible = np.clip(1.0 - taken / count, MIN_VISIBLE, 1.0)
     own = (mean**2 - white / count) / visible**2
     # Under the configured bias the mean is N(0, v² share² + w̄ / n): only a mean far outside
     # that says the object is worse (dividing by v² makes the estimate noisy where v is small).
@@ -162,33 +171,39 @@ def bias_shares(group: NoiseGroup, inverse: NDArray[np.float64], weights: NDArra
 
 
 def error_covariance(
-    information: NDArray[np.float64],
+    information: NDArray[np.float64] | scipy.sparse.spmatrix,
     groups: Sequence[NoiseGroup],
     rows: NDArray[np.float64],
     prior_scale: NDArray[np.float64] | None = None,
 ) -> ErrorCovariance:
     """Covariance of the error of ``rows @ state`` (module docstring).
 
-    ``information`` is the dense ``Λ`` the MAP was solved with: the groups' ``J_kᵀ J_k``
-    plus the priors' (the rest), at the MAP. ``prior_scale`` (n,) is, per state variable,
-    the spread of the truth about its prior's mean over the prior's stddev (``D``; default
-    1: every prior as stated).
+    ``information`` is the ``Λ`` the MAP was solved with (dense or sparse): the groups'
+    ``J_kᵀ J_k`` plus the priors' (the rest), at the MAP. ``prior_scale`` (n,) is, per state
+    variable, the spread of the truth about its prior's mean over the prior's stddev (``D``;
+    default 1: every prior as stated).
+
+    The rows' leverages need entries of ``Λ⁻¹`` all over it, so it is inverted densely
+    (``potri``, its upper triangle read in place); everything else stays sparse: the
+    priors' part is a diagonal, and built dense it took a third of the time on a
+    2800-variable graph.
     """
+    sparse = scipy.sparse.csr_matrix(information)
+    dense = sparse.toarray() if scipy.sparse.issparse(information) else np.asarray(information, dtype=float)
     try:
-        factor = scipy.linalg.cho_factor(information, lower=False, check_finite=False)
+        factor = scipy.linalg.cho_factor(dense, lower=False, check_finite=False)
     except np.linalg.LinAlgError as exc:
         raise ErrorCovarianceError(f"information matrix is not positive definite: {exc}") from exc
-    inverse, info = scipy.linalg.lapack.dpotri(factor[0], lower=False)
+    inverse, info = scipy.linalg.lapack.dpotri(factor[0], lower=False)  # its upper triangle only
     if info != 0:
         raise ErrorCovarianceError(f"information matrix could not be inverted (LAPACK info {info})")
-    inverse = np.triu(inverse) + np.triu(inverse, 1).T
-    solved = inverse @ rows.T  # X = Λ⁻¹ Rᵀ
+    solved = scipy.linalg.cho_solve(factor, rows.T, check_finite=False)  # X = Λ⁻¹ Rᵀ
     posterior = rows @ solved
-    rest = information.copy()
+    rest = sparse
     covariance = np.zeros_like(posterior)
     levels = {}
     for group in groups:
-        rest -= (group.jacobian.T @ group.jacobian).toarray()
+        rest = rest - group.jacobian.T @ group.jacobian
         if not len(group.residual):
             continue
         weights = white_weights(group, inverse)
@@ -200,7 +215,8 @@ def error_covariance(
             common = owner_rows(group, share[group.owner]) @ projected  # S_k J_k X
             covariance += common.T @ common
     if prior_scale is not None:
-        rest *= np.outer(prior_scale, prior_scale)
-    covariance += solved.T @ rest @ solved
+        scale = scipy.sparse.diags(np.asarray(prior_scale, dtype=float))
+        rest = scale @ rest @ scale
+    covariance += solved.T @ (rest @ solved)
     logger.debug("white noise over the configured: %s", ", ".join(f"{k} {v:.3g}" for k, v in levels.items()))
     return ErrorCovariance(0.5 * (covariance + covariance.T), 0.5 * (posterior + posterior.T), levels)

@@ -210,6 +210,8 @@ class MetropolisHastings:
         computed), and whether it passed the screen only by the floor."""
         new = proposal.view.state
         if self.screen is None:
+            if proposal.reversible is not None and not proposal.reversible():
+                return Acceptance(-math.inf, False)  # no way back: refused without solving J'
             log_p_new = self.target(new)
             if log_p_new == -math.inf:
                 return Acceptance(-math.inf, False)
@@ -222,6 +224,10 @@ class MetropolisHastings:
         if not (log_first >= 0.0 or math.log(rng.random()) < log_first):
             return Acceptance(None, False)
         at_floor = log_first <= log_floor
+        if proposal.reversible is not None and not proposal.reversible():
+            # Refused as the second stage would refuse it (its reverse is impossible), without
+            # solving J': the chain draws the same random numbers either way.
+            return Acceptance(-math.inf, at_floor)
         log_p_new = self.target(new)
         if log_p_new == -math.inf:
             return Acceptance(-math.inf, at_floor)

@@ -218,6 +218,7 @@ class StateView:
     # Informed group moves: keys (_GATHER, thing) and (_DISSOLVE, members); None: not yet weighed.
     informed_groups: _Choice | None = None
     balanced: _Choice | None = None  # keys: every state a balanced move reaches
+    balanced_reach: dict[Association, StateView] | None = None  # those states, not yet weighed
 
     @property
     def assignment(self) -> tuple[int, ...]:
@@ -236,6 +237,9 @@ class Proposal:
     # An informed move's reverse needs the guide from J', which needs J' solved: computed on
     # demand (then ``log_q_reverse`` is NaN), after the screen let the proposal through.
     reverse_later: Callable[[], float] | None = None
+    # Whether J' has a way back to J at all, known without solving J' (None: it has): a move
+    # without one is refused before its target is computed.
+    reversible: Callable[[], bool] | None = None
 
     def reverse_log_q(self) -> float:
         """log P(reverse kind | J') q(J' -> J)."""
@@ -744,13 +748,20 @@ class Proposals:
         neighbourhood (Zanella 2020), which picks the tracklet by the guide too. Keys are the
         states, so two ways to one state count once."""
         if view.balanced is None:
+            reached = self._balanced_reach(view)
+            view.balanced = self._guided(view, list(reached), reached.__getitem__)
+        return view.balanced
+
+    def _balanced_reach(self, view: StateView) -> dict[Association, StateView]:
+        """The states of :meth:`_balanced`'s neighbourhood, in its order, without the guide's weights."""
+        if view.balanced_reach is None:
             reached: dict[Association, StateView] = {}
             for t in self._short:
                 for dest in self._balanced_keys(view, t):
                     new = self._sent(view, t, dest)
                     reached.setdefault(new.state, new)
-            view.balanced = self._guided(view, list(reached), reached.__getitem__)
-        return view.balanced
+            view.balanced_reach = reached
+        return view.balanced_reach
 
     def _informed_groups(self, view: StateView) -> _Choice:
         """What an informed group move may do here, each weighted as :meth:`_informed` weighs
@@ -844,15 +855,17 @@ class Proposals:
         new = self.view(state)
         log_f = self._kinds(view).log_prob("balanced") + choice.log_prob(state)
 
-        def reverse() -> float:
+        def reversible() -> bool:
             # The way back can lie beyond the nearest objects from J' (the tracklet's leaving
             # moved its object's centroid): then there is none, and the move is refused.
-            back = self._balanced(new)
-            if view.state not in back.index:
-                return -math.inf
-            return self._kinds(new).log_prob("balanced") + back.log_prob(view.state)
+            return view.state in self._balanced_reach(new)
 
-        return Proposal("balanced", new, log_f, math.nan, reverse)
+        def reverse() -> float:
+            if not reversible():
+                return -math.inf
+            return self._kinds(new).log_prob("balanced") + self._balanced(new).log_prob(view.state)
+
+        return Proposal("balanced", new, log_f, math.nan, reverse, reversible)
 
     def propose(self, view: StateView, rng: np.random.Generator) -> Proposal | None:
         """A proposal from ``view``'s state, or None when no move is possible there or the

@@ -143,12 +143,20 @@ class AssociationTarget:
         self.view = camera_view(problem, self.detection)
         self.problem = self.clutter.problem  # with the distractors' prior rows
         self.estimation_problem = dataclasses.replace(self.problem, measurement_bounds=bounds)
+        solver = self.estimation_problem.solver
+        self._marginals_only = dataclasses.replace(
+            self.estimation_problem,
+            solver=dataclasses.replace(
+                solver, error_covariance=dataclasses.replace(solver.error_covariance, enabled=False)
+            ),
+        )
         self.tracklets = list(tracklets)
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: LRUCache[Association, GraphSolution] = lru(options.cache_size)
         self._anchor: GraphSolution | None = None
         self._thing_components: dict[tuple[int, ...], Component] = {}
         self._join_graph: list[set[int]] | None = None
+        self._join_gains: dict[tuple[int, int], float] = {}  # per joined pair a < b: :meth:`_join_gain`
         self._things: LRUCache[Association, list[tuple[int, ...]]] = lru(CLUTTER_THINGS_CACHE_SIZE)
         # Per state: how its graph groups appear, and the poses that was computed at.
         self._sights: LRUCache[Association, tuple[NDArray, Sightings]] = lru_bytes(options.sightings_cache_bytes)
@@ -190,9 +198,11 @@ class AssociationTarget:
                 labels = np.array([t.label for t in self.tracklets])
                 near = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1)) < JOIN_RADIUS_M
                 for a, b in zip(*np.nonzero(np.triu(near & (labels[:, None] == labels[None, :]), k=1)), strict=True):
-                    if self._join_gain(int(a), int(b)) > 0.0:
+                    gain = self._join_gain(int(a), int(b))
+                    if gain > 0.0:
                         graph[a].add(int(b))
                         graph[b].add(int(a))
+                        self._join_gains[(int(a), int(b))] = gain
             self._join_graph = graph
         return self._join_graph
 
@@ -218,7 +228,8 @@ class AssociationTarget:
         graph = self.joins()
         clutter = set(state.clutter)
         pairs = [(a, b) for a in state.clutter for b in sorted(graph[a] & clutter) if a < b]
-        pairs.sort(key=lambda p: (-self._join_gain(*p), p))
+        gains = self._join_gains  # looked up, not recomputed: this runs for every state the screen judges
+        pairs.sort(key=lambda p: (-gains[p], p))
         part_of: dict[int, tuple[int, ...]] = {t: (t,) for t in state.clutter}
         for a, b in pairs:
             first, second = part_of[a], part_of[b]
@@ -421,15 +432,24 @@ class AssociationTarget:
         """The chain is now in ``state``: warm-start later solves from its solution."""
         self._anchor = self._solutions.get(state, self._anchor)
 
-    def summary(self, state: Association) -> SampleSummary:
-        """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects."""
+    def summary(self, state: Association, *, error_covariances: bool = True) -> SampleSummary:
+        """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects.
+
+        ``error_covariances=False`` leaves out the covariances of the objects' errors
+        (``solver.error_covariance``; the objects then report their marginals), the costly
+        part on a long run: for a state whose weight in the map is nil.
+        """
         if not self.graph_groups(state):
             return SampleSummary(map_T_base=np.array(self.problem.odometry_poses), objects=())
         warm = self._solutions.get(state, self._anchor)
         started = time.perf_counter()
         members, rows = self._graph(state)
         result = solve_with_backend(
-            self.estimation_problem, members, warm_start=warm, with_covariances=True, priors=rows
+            self.estimation_problem if error_covariances else self._marginals_only,
+            members,
+            warm_start=warm,
+            with_covariances=True,
+            priors=rows,
         )
         self.work.marginal_seconds += time.perf_counter() - started
         self.work.marginal_solves += 1
