@@ -89,7 +89,9 @@ class ChainOutcome:
     spec: ChainSpec
     start: StartState
     result: ChainResult
-    summaries: tuple[SampleSummary, ...]  # one per distinct kept state, in the order of ``result.counts``
+    # One per distinct kept state, in the order of ``result.counts`` (without error covariances
+    # where the state's weight is nil: NEGLIGIBLE_NATS).
+    summaries: tuple[SampleSummary, ...]
     work: Work
     seconds: float
 
