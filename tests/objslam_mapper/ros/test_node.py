@@ -569,11 +569,13 @@ def test_call_reports_a_mapper_that_died_during_the_build(mapper, driver, proces
     out, err = call.communicate(timeout=90)
     assert call.returncode == 1
     assert out == ""
+    noticed_s = time.monotonic() - started
     assert err.strip() == (
-        "objslam call: the mapper went away during the build (/objslam/build_map is gone; "
-        "see its log, start it again and call again)"
+        "objslam call: the mapper went away during the build (see its log, start it again and call again)"
     )
-    print(f"noticed after {time.monotonic() - started:.1f} s")
+    # By the progress topic's liveliness (a 2 s lease), not by discovery, which notices the
+    # service gone only when the participant's lease ends (about 22 s with Fast DDS).
+    assert noticed_s < 12.0, f"noticed after {noticed_s:.1f} s"
 
 
 def test_call_gives_up_after_its_timeout(mapper, driver, processes):

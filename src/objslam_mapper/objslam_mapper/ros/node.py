@@ -32,6 +32,7 @@ from visualization_msgs.msg import MarkerArray
 
 from objslam_common.catalog import load_catalog
 from objslam_common.config import to_mapping
+from objslam_common.ros import liveliness
 from objslam_common.ros.conversions import time_from_ns
 from objslam_common.ros.params import declare_config
 from objslam_common.ros.spin import run_node
@@ -81,7 +82,8 @@ class MapperNode(Node):
         self.markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, LATCHED)
         self.trajectory_pub = self.create_publisher(PathMsg, TRAJECTORY_TOPIC, LATCHED)
         self.objects_pub = self.create_publisher(ObjectMap, OBJECTS_TOPIC, LATCHED)
-        self.progress_pub = self.create_publisher(BuildProgress, PROGRESS_TOPIC, QoSProfile(depth=10))
+        # A short liveliness lease: a caller notices a mapper killed mid-build (objslam_common.ros.liveliness).
+        self.progress_pub = self.create_publisher(BuildProgress, PROGRESS_TOPIC, liveliness.offered())
 
         self.create_service(BuildMap, BUILD_SERVICE, self.on_build_map, callback_group=ReentrantCallbackGroup())
         self.create_service(Trigger, RESET_SERVICE, self.on_reset, callback_group=MutuallyExclusiveCallbackGroup())

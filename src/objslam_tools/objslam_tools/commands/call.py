@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 import time
+from typing import Any
 
 import yaml
 
 from objslam_tools.ros_util import message_to_plain, ros_node
 
 SERVICE = "/objslam/build_map"
+PROGRESS_TOPIC = "/objslam/map/progress"
 NO_SERVICE_EXIT = 1
 GONE_GRACE_S = 2.0
 
@@ -33,7 +36,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_build_map(args: argparse.Namespace) -> int:
     import rclpy
+    from rclpy.event_handler import SubscriptionEventCallbacks
 
+    from objslam_common.ros import liveliness
+    from objslam_msgs.msg import BuildProgress
     from objslam_msgs.srv import BuildMap
 
     for name, value in (
@@ -47,6 +53,20 @@ def run_build_map(args: argparse.Namespace) -> int:
             return 2
     with ros_node("objslam_call") as node:
         client = node.create_client(BuildMap, SERVICE)
+        # The mapper's liveliness on its progress topic: lost within seconds of its death.
+        lost = threading.Event()
+
+        def on_liveliness(event: Any) -> None:
+            if event.alive_count_change < 0 and event.alive_count == 0:
+                lost.set()
+
+        node.create_subscription(
+            BuildProgress,
+            PROGRESS_TOPIC,
+            lambda _msg: None,
+            liveliness.watched(),
+            event_callbacks=SubscriptionEventCallbacks(liveliness=on_liveliness),
+        )
         if not client.wait_for_service(timeout_sec=args.wait):
             print(
                 f"objslam call: no service answered at {SERVICE} within {args.wait:g} s (is the mapper running?)",
@@ -66,16 +86,16 @@ def run_build_map(args: argparse.Namespace) -> int:
                 )
                 return NO_SERVICE_EXIT
             rclpy.spin_once(node, timeout_sec=0.1)
-            # A mapper that died mid-build never answers: notice that its service went away
-            # (after a grace period, as discovery may flicker).
+            # A mapper that died mid-build never answers: notice that its liveliness lapsed
+            # or, where the middleware reports none, that its service went away (after a
+            # grace period, as discovery may flicker; DDS notices that only after its lease).
             if client.service_is_ready():
                 gone_since = None
             elif gone_since is None:
                 gone_since = time.monotonic()
-            elif time.monotonic() - gone_since > GONE_GRACE_S:
+            if lost.is_set() or (gone_since is not None and time.monotonic() - gone_since > GONE_GRACE_S):
                 print(
-                    f"objslam call: the mapper went away during the build ({SERVICE} is gone; "
-                    "see its log, start it again and call again)",
+                    "objslam call: the mapper went away during the build (see its log, start it again and call again)",
                     file=sys.stderr,
                 )
                 return NO_SERVICE_EXIT
