@@ -14,6 +14,7 @@ from __future__ import annotations
 from rclpy.duration import Duration
 from rclpy.qos import QoSLivelinessPolicy, QoSProfile
 
+PROGRESS_TOPIC = "/objslam/map/progress"  # the mapper's, whose liveliness a caller watches
 LEASE_S = 2.0  # offered by the mapper: long enough that a busy machine does not miss an assertion
 
 

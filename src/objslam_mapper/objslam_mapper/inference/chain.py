@@ -86,6 +86,10 @@ class ChainResult:
     log_targets: tuple[float, ...] = ()  # log target of each state of ``trace``
     history: tuple[tuple[float, int], ...] = ()  # (log target, objects) after every step, burn-in included
 
+    def kept_log_target(self) -> dict[Association, float]:
+        """The log target of each distinct kept state (read off the trace)."""
+        return dict(zip(self.trace, self.log_targets, strict=True))
+
     @property
     def acceptance_rates(self) -> dict[str, float]:
         return {kind: stats.acceptance_rate for kind, stats in self.moves.items()}

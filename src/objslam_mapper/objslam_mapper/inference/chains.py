@@ -102,7 +102,7 @@ class ChainOutcome:
 
     def kept_log_targets(self) -> list[float]:
         """The log target of each kept state, in the order of ``result.counts``."""
-        value = dict(zip(self.result.trace, self.result.log_targets, strict=True))
+        value = self.result.kept_log_target()
         return [value[state] for state in self.result.counts]
 
 
@@ -162,7 +162,7 @@ def run_chain_task(task: ChainTask, progress: ChainProgress | None = None) -> Ch
         keep_trace=True,
         on_move=target.move_to,
     )
-    value = dict(zip(result.trace, result.log_targets, strict=True))
+    value = result.kept_log_target()
     best = max(value.values())
     summaries = tuple(
         target.summary(state, error_covariances=config.pooling != "target" or value[state] >= best - NEGLIGIBLE_NATS)

@@ -52,7 +52,6 @@ RESET_SERVICE = "/objslam/reset"
 MARKERS_TOPIC = "/objslam/map/markers"
 TRAJECTORY_TOPIC = "/objslam/map/trajectory"
 OBJECTS_TOPIC = "/objslam/map/objects"
-PROGRESS_TOPIC = "/objslam/map/progress"
 WARN_PERIOD_S = 5.0
 PROGRESS_PERIOD_S = 0.5
 
@@ -83,7 +82,7 @@ class MapperNode(Node):
         self.trajectory_pub = self.create_publisher(PathMsg, TRAJECTORY_TOPIC, LATCHED)
         self.objects_pub = self.create_publisher(ObjectMap, OBJECTS_TOPIC, LATCHED)
         # A short liveliness lease: a caller notices a mapper killed mid-build (objslam_common.ros.liveliness).
-        self.progress_pub = self.create_publisher(BuildProgress, PROGRESS_TOPIC, liveliness.offered())
+        self.progress_pub = self.create_publisher(BuildProgress, liveliness.PROGRESS_TOPIC, liveliness.offered())
 
         self.create_service(BuildMap, BUILD_SERVICE, self.on_build_map, callback_group=ReentrantCallbackGroup())
         self.create_service(Trigger, RESET_SERVICE, self.on_reset, callback_group=MutuallyExclusiveCallbackGroup())

@@ -13,7 +13,6 @@ import yaml
 from objslam_tools.ros_util import message_to_plain, ros_node
 
 SERVICE = "/objslam/build_map"
-PROGRESS_TOPIC = "/objslam/map/progress"
 NO_SERVICE_EXIT = 1
 GONE_GRACE_S = 2.0
 
@@ -62,7 +61,7 @@ def run_build_map(args: argparse.Namespace) -> int:
 
         node.create_subscription(
             BuildProgress,
-            PROGRESS_TOPIC,
+            liveliness.PROGRESS_TOPIC,
             lambda _msg: None,
             liveliness.watched(),
             event_callbacks=SubscriptionEventCallbacks(liveliness=on_liveliness),
