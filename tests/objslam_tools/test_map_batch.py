@@ -74,3 +74,12 @@ def test_user_errors_are_one_line_before_any_work(args, message, tmp_path):
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert message in done.stderr
     assert not (tmp_path / "maps").exists() or not any((tmp_path / "maps").iterdir())
+
+
+def test_the_biggest_bag_is_prepared_first():
+    from types import SimpleNamespace
+
+    from objslam_tools.commands.map_batch import biggest_first
+
+    bags = [SimpleNamespace(message_count=n) for n in (300, 2000, 300, 900)]
+    assert biggest_first(bags) == [1, 3, 0, 2]

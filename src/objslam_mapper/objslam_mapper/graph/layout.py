@@ -37,6 +37,13 @@ class Layout:
         return len(self.groups)
 
     @functools.cached_property
+    def first_pose(self) -> NDArray[np.int64]:
+        """(K,) the first pose that saw each object: its pose-object block is zero above it."""
+        if not self.n_objects:
+            return np.zeros(0, dtype=np.int64)
+        return np.minimum.reduceat(self.pose_of, self.starts)
+
+    @functools.cached_property
     def sparse(self) -> SparsePattern:
         return SparsePattern.of(self)
 
