@@ -177,7 +177,7 @@ def _factorize_schur(
     rhs[:, n_object_vars:-1] = lin.pose_calib.reshape(POSE_DIM * n, nc)
     rhs[:, -1] = grad_pose
     start_rows = None
-    if rhs.shape[1] >= 2 * _STAIRCASE_MIN_COLUMNS:
+    if _staircase_groups(rhs.shape[1]) > 1:  # rows above each object's first sighting are zero
         first_pose = system.layout.first_pose if plan is None else system.layout.first_pose[plan.kept]
         start_rows = np.concatenate([np.repeat(POSE_DIM * first_pose, OBJECT_DIM), np.zeros(nc + 1, dtype=np.int64)])
     whitened, gram = _whiten(chol_pose, rhs, start_rows)
@@ -228,6 +228,11 @@ _STAIRCASE_GROUPS = 8
 _STAIRCASE_MIN_COLUMNS = 40
 
 
+def _staircase_groups(columns: int) -> int:
+    """How many column groups :func:`_whiten` takes (1: one plain solve)."""
+    return max(1, min(_STAIRCASE_GROUPS, columns // _STAIRCASE_MIN_COLUMNS))
+
+
 def _whiten(
     chol_pose: NDArray[np.float64], rhs: NDArray[np.float64], start_rows: NDArray[np.int64] | None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -239,8 +244,8 @@ def _whiten(
     band's trailing part only, and two groups' product runs over the rows both can be
     nonzero in (docs/method.md, "Why it is fast"). Without ``start_rows``, or with few
     columns, one plain solve."""
-    n_groups = 0 if start_rows is None else min(_STAIRCASE_GROUPS, len(start_rows) // _STAIRCASE_MIN_COLUMNS)
-    if start_rows is None or n_groups <= 1:  # a few objects: one solve costs less than the bookkeeping
+    n_groups = 1 if start_rows is None else _staircase_groups(len(start_rows))
+    if start_rows is None or n_groups == 1:  # a few objects: one solve costs less than the bookkeeping
         whitened, info = lapack.dtbtrs(chol_pose, rhs, uplo="U", trans="T", overwrite_b=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
