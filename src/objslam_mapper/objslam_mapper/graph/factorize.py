@@ -177,7 +177,9 @@ def _factorize_schur(
     rhs[:, n_object_vars:-1] = lin.pose_calib.reshape(POSE_DIM * n, nc)
     rhs[:, -1] = grad_pose
     start_rows = None
-    if _staircase_groups(rhs.shape[1]) > 1:  # rows above each object's first sighting are zero
+    # Rows above each object's first sighting are zero; with a few objects one plain solve
+    # costs less than the bookkeeping of skipping them.
+    if _staircase_groups(rhs.shape[1]) > 1:
         first_pose = system.layout.first_pose if plan is None else system.layout.first_pose[plan.kept]
         start_rows = np.concatenate([np.repeat(POSE_DIM * first_pose, OBJECT_DIM), np.zeros(nc + 1, dtype=np.int64)])
     whitened, gram = _whiten(chol_pose, rhs, start_rows)
@@ -242,10 +244,9 @@ def _whiten(
     at the first pose that saw it), and so is column c of X, ``U^T`` being lower triangular.
     The columns are taken in groups in order of their start: each group is solved on the
     band's trailing part only, and two groups' product runs over the rows both can be
-    nonzero in (docs/method.md, "Why it is fast"). Without ``start_rows``, or with few
-    columns, one plain solve."""
-    n_groups = 1 if start_rows is None else _staircase_groups(len(start_rows))
-    if start_rows is None or n_groups == 1:  # a few objects: one solve costs less than the bookkeeping
+    nonzero in (docs/method.md, "Why it is fast"). Without ``start_rows`` (the caller's
+    choice, :func:`_staircase_groups`), one plain solve."""
+    if start_rows is None:
         whitened, info = lapack.dtbtrs(chol_pose, rhs, uplo="U", trans="T", overwrite_b=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"banded triangular solve failed (info {info})")
@@ -253,7 +254,7 @@ def _whiten(
     order = np.argsort(start_rows, kind="stable")
     whitened = np.zeros(rhs.shape, order="F")
     groups = []
-    for columns in np.array_split(order, n_groups):
+    for columns in np.array_split(order, _staircase_groups(len(start_rows))):
         first = int(start_rows[columns[0]])
         # Through the transposes: Fortran-ordered columns picked and written without a copy.
         part = rhs.T[columns, first:].T
