@@ -12,9 +12,10 @@ from objslam_mapper.config import DetectionConfig, SamplerConfig
 from objslam_mapper.inference.algorithm1 import build_from_samples
 from objslam_mapper.inference.association import CLUTTER
 from objslam_mapper.inference.chains import ChainSpec, InProcess, chain_specs, run_chain_task
+from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.infer import finish, infer_map, prepare
 from objslam_mapper.inference.screen import ProposalScreen
-from objslam_mapper.inference.start import dispersed_start, greedy_association, start_state
+from objslam_mapper.inference.start import dispersed_start, greedy_association, initial_association, start_state
 from objslam_mapper.inference.target import AssociationTarget, TargetOptions
 from objslam_mapper.inference.tracklets import tracklets_of_problem
 from tests.objslam_mapper.association_scenes import problem_of, simulate
@@ -153,7 +154,13 @@ def test_the_map_file_records_each_chain(built):
     runs = built.diagnostics["chain_runs"]
     assert [r["start"] for r in runs] == ["heuristic", "singletons", "greedy"]
     for run in runs:
-        for key in ("acceptance_rates", "distinct_associations_visited", "best_log_target", "kept_objects_mean"):
+        for key in (
+            "acceptance_rates",
+            "distinct_associations_visited",
+            "best_log_target",
+            "kept_objects_mean",
+            "unconverged_solves",
+        ):
             assert key in run
         assert len(run["trace"]["log_target"]) == len(run["trace"]["objects"]) <= 300
         assert run["trace"]["every_steps"] * len(run["trace"]["objects"]) <= CHAINS.samples
@@ -164,6 +171,18 @@ def test_the_map_file_records_each_chain(built):
     names = set(convergence["quantities"])
     assert {"log_target", "objects"} <= names
     assert {f"identity_{o.id}" for o in (*built.objects, *built.rejected)} <= names
+
+
+@pytest.mark.parametrize(("max_iterations", "unconverged"), [(2, 1), (None, 0)])
+def test_the_target_counts_the_solves_that_stopped_before_converging(problem, max_iterations, unconverged):
+    limit = problem.solver.max_iterations if max_iterations is None else max_iterations
+    short = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, max_iterations=limit))
+    chained = tracklets_of_problem(short, CHAINS.tracklets)
+    work = Work()
+    target = AssociationTarget(short, chained.tracklets, TargetOptions.of(CHAINS), work)
+    solution = target.solution(initial_association(chained.tracklets, 0.6))
+    assert (work.solves, work.unconverged_solves) == (1, unconverged)
+    assert solution.converged is (unconverged == 0)
 
 
 def test_a_chain_task_is_a_pure_function_of_its_task(problem):

@@ -19,7 +19,9 @@ to 8000 draws, so at a bulk ESS of 400 the noise alone puts R-hat at about 1.01.
 
 Where a chain holds a state no other chain visits (an identity on the other side of 1/2, an
 R-hat that is infinite, or a chain none of whose kept states another chain kept) more draws
-of the same chains need not meet, and it is None. The last is checked on the states
+of the same chains need not meet, and it is None. Such a chain is also said to have stopped
+most of its graph solves short where it did (``UNCONVERGED_SHARE``): then its values are
+where the solves stopped, and the chain can be stuck on a value, not on a state. The last is checked on the states
 themselves: on ``twins`` seed 15 one chain kept two states 17 nats below every state of the
 others, with the same identities, and the estimate had called it short of 270000 draws.
 
@@ -46,6 +48,10 @@ from objslam_mapper.inference.chains import ChainOutcome
 LOG_TARGET = "log_target"
 OBJECTS = "objects"
 ESS_PER_CHAIN = 100  # bulk ESS per chain before R-hat is trusted (Vehtari et al. 2021, section 4)
+# A chain apart from the others most of whose graph solves stopped short is named as such:
+# its states' values are not their optima, so it can hold a state whose value was a lucky
+# solve and refuse every move from it (docs/method.md, "States whose solve has no optimum").
+UNCONVERGED_SHARE = 0.5
 
 
 def identity_name(map_id: int) -> str:
@@ -184,6 +190,12 @@ def chain_convergence(
     apart = _chains_apart(outcomes) if disagreements else []
     for k in apart:
         disagreements.append(f"chain {k} kept only states no other chain kept")
+        work = outcomes[k].work
+        if work.solves and work.unconverged_solves >= UNCONVERGED_SHARE * work.solves:
+            disagreements.append(
+                f"chain {k}: {work.unconverged_solves} of its {work.solves} graph solves stopped before converging, "
+                "so its states' values are where those solves stopped, which depends on where each one started"
+            )
     if disagreements and not split and not apart and math.isfinite(rhat_worst) and ess_min > 0.0:
         if ess_min < ESS_PER_CHAIN * chains:
             needed = draws_needed(draws, chains, ess_min)

@@ -372,6 +372,7 @@ class AssociationTarget:
         )
         self.work.solve_seconds += time.perf_counter() - start
         self.work.solves += 1
+        self.work.unconverged_solves += not result.converged
         return remember(self._solutions, state, result)
 
     def __call__(self, state: Association) -> float:
