@@ -19,11 +19,12 @@ to 8000 draws, so at a bulk ESS of 400 the noise alone puts R-hat at about 1.01.
 
 Where a chain holds a state no other chain visits (an identity on the other side of 1/2, an
 R-hat that is infinite, or a chain none of whose kept states another chain kept) more draws
-of the same chains need not meet, and it is None. Such a chain is also said to have stopped
-most of its graph solves short where it did (``UNCONVERGED_SHARE``): then its values are
-where the solves stopped, and the chain can be stuck on a value, not on a state. The last is checked on the states
+of the same chains need not meet, and it is None. The last is checked on the states
 themselves: on ``twins`` seed 15 one chain kept two states 17 nats below every state of the
 others, with the same identities, and the estimate had called it short of 270000 draws.
+Such a chain is also said to have stopped most of its graph solves short where it did
+(``UNCONVERGED_SHARE``): its values are then where those solves stopped, and it can be
+stuck on a value, not on a state.
 
 A quantity that is the same constant in every draw of every chain has no R-hat in ArviZ
 (0/0); the chains agree on it exactly, so it counts as 1. One that is constant within each
