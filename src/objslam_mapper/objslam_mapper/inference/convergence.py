@@ -51,7 +51,7 @@ OBJECTS = "objects"
 ESS_PER_CHAIN = 100  # bulk ESS per chain before R-hat is trusted (Vehtari et al. 2021, section 4)
 # A chain apart from the others most of whose graph solves stopped short is named as such:
 # its states' values are not their optima, so it can hold a state whose value was a lucky
-# solve and refuse every move from it (docs/method.md, "States whose solve has no optimum").
+# solve and refuse every move from it (docs/method.md, "Solves that do not converge").
 UNCONVERGED_SHARE = 0.5
 
 
