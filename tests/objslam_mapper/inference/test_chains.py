@@ -175,8 +175,9 @@ def test_the_map_file_records_each_chain(built):
 
 @pytest.mark.parametrize(("max_iterations", "unconverged"), [(2, 1), (None, 0)])
 def test_the_target_counts_the_solves_that_stopped_before_converging(problem, max_iterations, unconverged):
-    limit = problem.solver.max_iterations if max_iterations is None else max_iterations
-    short = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, max_iterations=limit))
+    short = problem
+    if max_iterations is not None:
+        short = dataclasses.replace(problem, solver=dataclasses.replace(problem.solver, max_iterations=max_iterations))
     chained = tracklets_of_problem(short, CHAINS.tracklets)
     work = Work()
     target = AssociationTarget(short, chained.tracklets, TargetOptions.of(CHAINS), work)
