@@ -30,6 +30,7 @@ from objslam_mapper.graph.gtsam_backend import (
     solve_gtsam,
 )
 from objslam_mapper.graph.keyframes import keyframes_of
+from objslam_mapper.graph.layout import layout_of
 from objslam_mapper.graph.problem import build_problem, with_extra_priors
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.model.slice_model import bounds_of_cuts, predict_slices
@@ -302,7 +303,7 @@ def test_a_camera_inside_an_object_is_a_huge_error(reference):
 def test_damping_adds_the_scaled_diagonal(reference):
     problem, groups, ours = reference
     graph, keys = build_gtsam_graph(problem, groups)
-    linearize = _Linearizer(graph, keys)
+    linearize = _Linearizer(graph, keys, problem, layout_of(problem, groups))
     linear = linearize(keys.to_values(*state(ours)))
     order = gtsam.Ordering()
     for key in sorted(linearize.dims):

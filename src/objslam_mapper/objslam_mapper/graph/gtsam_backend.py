@@ -66,11 +66,13 @@ from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import SolverConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.gauge import GAUGE_DIM, about_trajectory, trajectory_gauge
+from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.graph.keyframes import keyframes_of
 from objslam_mapper.graph.layout import Layout, graph_log_normalizer, layout_of
 from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule, count_outliers
 from objslam_mapper.graph.problem import LOG_2PI, OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.graph.solver import (
+    LOST_INFORMATION_SHARE,
     NOT_STARTED,
     GraphSolution,
     SolutionCovariances,
@@ -377,8 +379,10 @@ class _Linear:
 class _Linearizer:
     """Linearizes a graph and reads off its cost (``1/2 |b|^2`` of the whitened system) in one pass."""
 
-    def __init__(self, graph: gtsam.NonlinearFactorGraph, keys: GtsamKeys):
+    def __init__(self, graph: gtsam.NonlinearFactorGraph, keys: GtsamKeys, problem: GraphProblem, layout: Layout):
         self.graph = graph
+        self.keys, self.problem, self.layout = keys, problem, layout
+        self.prior_xy_information = problem.prior_stddev[layout.priors, :2] ** -2.0  # (K, 2)
         self.dims = {k: POSE_DIM for k in keys.pose_keys} | {k: OBJECT_DIM for k in keys.object_keys}
         if keys.calibration_dim:
             self.dims[keys.calibration()] = keys.calibration_dim
@@ -396,28 +400,70 @@ class _Linearizer:
     def eliminate(self, graph: gtsam.GaussianFactorGraph) -> gtsam.GaussianBayesTree:
         return graph.eliminateMultifrontal(self.ordering)
 
+    def lost(self, lin: gtsam.GaussianFactorGraph) -> NDArray[np.bool_]:
+        """(K,) the objects no slice places, as :func:`solver.lost_objects` finds them."""
+        diagonals = _diagonals(lin, self.dims)
+        information = np.array([diagonals[k][:2] for k in self.keys.object_keys]).reshape(-1, 2)
+        prior = self.prior_xy_information
+        return np.all(information - prior <= LOST_INFORMATION_SHARE * prior, axis=1)
 
-def _damped(lin: gtsam.GaussianFactorGraph, damping: float, dims: dict[int, int]) -> gtsam.GaussianFactorGraph:
-    """``lin`` with Marquardt damping ``diag(Lambda) *= 1 + damping`` (as the fast solver damps).
+    def restart(self, values: gtsam.Values, current: _Linear, lost: NDArray[np.bool_]) -> tuple[gtsam.Values, _Linear]:
+        """As :func:`solver._restart`: each lost object from its own slices, where that lowers the cost."""
+        poses, _ = self.keys.from_values(values)
+        for j in np.flatnonzero(lost):
+            moved = gtsam.Values(values)
+            moved.update(self.keys.object(j), initial_object(self.problem, self.layout.groups[j], poses))
+            moved_linear = self(moved)
+            if moved_linear.cost < current.cost:
+                values, current = moved, moved_linear
+        return values, current
 
-    The diagonal of ``Lambda = A^T A`` comes from the sparse whitened Jacobian, whose
-    columns are numbered by sorted key (``dims``: every variable's dimension).
-    """
+
+def _diagonals(lin: gtsam.GaussianFactorGraph, dims: dict[int, int]) -> dict[int, NDArray[np.float64]]:
+    """Per variable, its block of the diagonal of ``Lambda = A^T A``, from the sparse whitened
+    Jacobian, whose columns are numbered by sorted key (``dims``: every variable's dimension)."""
     triplets = lin.sparseJacobian_()
     total = sum(dims.values())
     diagonal = np.bincount(triplets[1].astype(np.int64) - 1, weights=triplets[2] ** 2, minlength=total + 1)
-    damped = lin.clone()
-    start = 0
+    blocks, start = {}, 0
     for key in sorted(dims):
-        dim = dims[key]
-        diag = diagonal[start : start + dim]
-        start += dim
+        blocks[key] = diagonal[start : start + dims[key]]
+        start += dims[key]
+    return blocks
+
+
+def _damped(lin: gtsam.GaussianFactorGraph, damping: float, dims: dict[int, int]) -> gtsam.GaussianFactorGraph:
+    """``lin`` with Marquardt damping ``diag(Lambda) *= 1 + damping`` (as the fast solver damps)."""
+    damped = lin.clone()
+    for key, diag in _diagonals(lin, dims).items():
+        dim = len(diag)
         damped.add(
             gtsam.JacobianFactor(
                 key, np.diag(np.sqrt(damping * diag)), np.zeros(dim), gtsam.noiseModel.Unit.Create(dim)
             )
         )
     return damped
+
+
+def _hold_lost_objects(linearize: _Linearizer, lin: gtsam.GaussianFactorGraph, delta: gtsam.VectorValues) -> None:
+    """Zero the x, y step of every object no slice places, as :func:`solver.hold_lost_objects` does."""
+    held = gtsam.VectorValues()
+    for j in np.flatnonzero(linearize.lost(lin)):
+        key = linearize.keys.object(j)
+        step = np.array(delta.at(key))
+        step[:2] = 0.0
+        held.insert(key, step)
+    if held.size():
+        delta.update(held)
+
+
+def _step(
+    linearize: _Linearizer, current: _Linear, bayes_tree: gtsam.GaussianBayesTree
+) -> tuple[gtsam.VectorValues, float]:
+    """The step of an elimination, lost objects held, and the decrease the undamped linear model predicts for it."""
+    delta = bayes_tree.optimize()
+    _hold_lost_objects(linearize, current.graph, delta)
+    return delta, current.cost - float(current.graph.error(delta))
 
 
 @dataclass
@@ -439,7 +485,14 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
     current = linearize(values)
     damping, growth = 0.0, 2.0
     iterations = 1
+    restarted = np.zeros(linearize.keys.object_count, dtype=bool)
     while iterations < max_iterations:
+        lost = linearize.lost(current.graph) & ~restarted
+        if lost.any():
+            restarted |= lost
+            iterations += 1
+            values, current = linearize.restart(values, current, lost)
+            continue
         system = current.graph if damping == 0.0 else _damped(current.graph, damping, linearize.dims)
         try:
             bayes_tree = linearize.eliminate(system)
@@ -448,11 +501,17 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
             if damping > cfg.max_lambda:
                 break
             continue
-        delta = bayes_tree.optimize()
-        predicted = current.cost - float(current.graph.error(delta))
+        delta, predicted = _step(linearize, current, bayes_tree)
         tolerance = cfg.absolute_tolerance + cfg.relative_tolerance * current.cost
-        if predicted <= tolerance and damping <= cfg.initial_lambda:
-            return _Driven(values, current, bayes_tree if damping == 0.0 else None, iterations, True)
+        if predicted <= tolerance:
+            if damping <= cfg.initial_lambda:
+                return _Driven(values, current, bayes_tree if damping == 0.0 else None, iterations, True)
+            try:  # as the fast solver: is the undamped step's prediction small too?
+                undamped = linearize.eliminate(current.graph)
+            except RuntimeError:
+                undamped = None
+            if undamped is not None and _step(linearize, current, undamped)[1] <= tolerance:
+                return _Driven(values, current, undamped, iterations, True)
         new_values = values.retract(delta)
         new = linearize(new_values)
         iterations += 1
@@ -460,7 +519,7 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
             decrease = current.cost - new.cost
             rho = decrease / max(predicted, 1e-300)
             values, current = new_values, new
-            damping *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(rho, 1.0) - 1.0) ** 3)
             growth = 2.0
             if damping < 1e-3 * cfg.initial_lambda:
                 damping = 0.0
@@ -543,7 +602,7 @@ def solve_gtsam(
             break
         graph, keys = _build(problem, layout, per_detection, window_poses, cap_scale)
         solved_cap_scale = cap_scale
-        linearize = _Linearizer(graph, keys)
+        linearize = _Linearizer(graph, keys, problem, layout)
         if drive == "python":
             driven = _drive_python(linearize, values, cfg, limit)
         else:

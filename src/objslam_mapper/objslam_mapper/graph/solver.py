@@ -286,12 +286,21 @@ def _minimize(
     The damping follows Nielsen (1999): after a step with gain ratio rho (actual over
     predicted decrease) it shrinks by max(1/3, 1 - (2 rho - 1)^3), after a failure it
     grows by a factor that doubles. Converged when a (nearly) undamped step predicts, or
-    achieves, less than the tolerance. Returns the undamped factorization at the final
-    state when the last one computed is that.
+    achieves, less than the tolerance; when a damped step predicts less, the undamped one
+    is computed to tell an optimum from a step the damping made small. Objects no slice
+    places are held (:func:`hold_lost_objects`). Returns the undamped factorization at the
+    final state when the last one computed is that.
     """
     damping, growth = 0.0, 2.0
     iterations = 1
+    restarted = np.zeros(graph.n_objects, dtype=bool)
     while iterations < max_iterations:
+        lost = lost_objects(graph, lin) & ~restarted
+        if lost.any():
+            restarted |= lost
+            iterations += 1
+            state, lin = _restart(graph, state, lin, lost)
+            continue
         try:
             fac = factorize(graph, lin, damping)
         except np.linalg.LinAlgError:
@@ -299,9 +308,17 @@ def _minimize(
             if damping > cfg.max_lambda:
                 break
             continue
+        hold_lost_objects(graph, lin, fac, damping)
         tolerance = cfg.absolute_tolerance + cfg.relative_tolerance * lin.cost
-        if fac.predicted_decrease <= tolerance and damping <= cfg.initial_lambda:
-            return state, lin, fac if damping == 0.0 else None, iterations, True
+        if fac.predicted_decrease <= tolerance:
+            if damping <= cfg.initial_lambda:
+                return state, lin, fac if damping == 0.0 else None, iterations, True
+            # Where slices sit at their caps' edge or objects are barely placed, the undamped
+            # step fails again and again, and the damping never came back down to
+            # initial_lambda: such solves ran to their budget at an optimum.
+            undamped = _undamped(graph, lin)
+            if undamped is not None and undamped.predicted_decrease <= tolerance:
+                return state, lin, undamped, iterations, True
         poses, objects, calib = state
         new_poses = poses + fac.step_pose.reshape(-1, POSE_DIM)
         new_poses[:, 2] = wrap_angle(new_poses[:, 2])
@@ -312,7 +329,7 @@ def _minimize(
             decrease = lin.cost - new_lin.cost
             rho = decrease / max(fac.predicted_decrease, 1e-300)
             state, lin = new_state, new_lin
-            damping *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(rho, 1.0) - 1.0) ** 3)
             growth = 2.0
             if damping < 1e-3 * cfg.initial_lambda:
                 damping = 0.0
@@ -323,6 +340,70 @@ def _minimize(
             if damping > cfg.max_lambda:
                 break
     return state, lin, None, iterations, False
+
+
+def _undamped(graph: AssociationSystem, lin: Linearization) -> Factorization | None:
+    """The undamped step at ``lin`` (lost objects held), None where the information is not positive definite."""
+    try:
+        fac = factorize(graph, lin, 0.0)
+    except np.linalg.LinAlgError:
+        return None
+    hold_lost_objects(graph, lin, fac, 0.0)
+    return fac
+
+
+def lost_objects(graph: AssociationSystem, lin: Linearization) -> NDArray[np.bool_]:
+    """(K,) whether no slice of an object says where it is: its slices are all beyond their
+    outlier caps (or on the free side of their bounds), its x, y held by its class prior alone."""
+    if not graph.n_objects or not lin.valid:
+        return np.zeros(graph.n_objects, dtype=bool)
+    prior_information = graph.prior_inv_sigma[:, :2] ** 2
+    information = lin.object_diag[:, [0, 1], [0, 1]]
+    return np.all(information - prior_information <= LOST_INFORMATION_SHARE * prior_information, axis=1)
+
+
+def _restart(
+    graph: AssociationSystem, state: _State, lin: Linearization, lost: NDArray[np.bool_]
+) -> tuple[_State, Linearization]:
+    """``state`` with each ``lost`` object started again from its own slices at the current
+    poses, where that lowers the cost; else unchanged (its horizontal step is then held)."""
+    poses, objects, calib = state
+    for j in np.flatnonzero(lost):
+        moved = objects.copy()
+        moved[j] = initial_object(graph.problem, graph.layout.groups[j], poses)
+        moved_lin = graph.linearize(poses, moved, calib)
+        if moved_lin.valid and moved_lin.cost < lin.cost:
+            objects, lin = moved, moved_lin
+    return (poses, objects, calib), lin
+
+
+def hold_lost_objects(graph: AssociationSystem, lin: Linearization, fac: Factorization, damping: float) -> None:
+    """Zero the horizontal step of every object none of whose slices says where it is.
+
+    An object whose slices are all beyond their outlier caps (or all on the free side of
+    their bounds) is held in x, y by its class prior alone (``xy_stddev_m`` about the first
+    pose, 100 m by default): the Gauss-Newton step sends it there in one jump, through the
+    places its slices would fit, and every such step fails; Marquardt damping scales with
+    that prior's tiny information, so before it shrinks that step it has frozen every other
+    variable, and the solve crept to its budget (docs/method.md, "Solves that do not
+    converge"). No slice links those x, y to the rest of the system, so dropping their
+    step is the step of the system with them held; the cost left is the prior's pull,
+    (distance / xy_stddev_m)^2 / 2, 0.125 nats at 50 m.
+    """
+    lost = lost_objects(graph, lin)
+    if not lost.any():
+        return
+    step = fac.step_object.reshape(-1, OBJECT_DIM)
+    held = step[lost, :2]
+    grad = lin.grad_object.reshape(-1, OBJECT_DIM)[lost, :2]
+    information = lin.object_diag[lost][:, [0, 1], [0, 1]]
+    fac.predicted_decrease -= 0.5 * float(np.sum(-grad * held + damping * information * held**2))
+    step[lost, :2] = 0.0
+    fac.step_object = step.reshape(-1)
+
+
+# An object's slices add no more than this share of its prior's information on x, y: lost.
+LOST_INFORMATION_SHARE = 1e-9
 
 
 class SolveOutcome(NamedTuple):
