@@ -242,7 +242,8 @@ class SolverConfig:
     max_iterations: int = setting(50, "most linearizations per solve", minimum=1, expert=True)
     absolute_tolerance: float = setting(
         1e-4,
-        "converged when the cost (half chi-square) drops by less than this",
+        "converged when the undamped Gauss-Newton step predicts, or a step achieves, "
+        "a drop of the cost (half chi-square) below this",
         minimum=0.0,
         expert=True,
     )

@@ -410,7 +410,7 @@ class _Linearizer:
     def restart(self, values: gtsam.Values, current: _Linear, lost: NDArray[np.bool_]) -> tuple[gtsam.Values, _Linear]:
         """As :func:`solver._restart`: each lost object from its own slices, where that lowers the cost."""
         poses, _ = self.keys.from_values(values)
-        for j in np.flatnonzero(lost):
+        for j in np.flatnonzero(lost).tolist():
             moved = gtsam.Values(values)
             moved.update(self.keys.object(j), initial_object(self.problem, self.layout.groups[j], poses))
             moved_linear = self(moved)
@@ -424,8 +424,10 @@ def _diagonals(lin: gtsam.GaussianFactorGraph, dims: dict[int, int]) -> dict[int
     Jacobian, whose columns are numbered by sorted key (``dims``: every variable's dimension)."""
     triplets = lin.sparseJacobian_()
     total = sum(dims.values())
-    diagonal = np.bincount(triplets[1].astype(np.int64) - 1, weights=triplets[2] ** 2, minlength=total + 1)
-    blocks, start = {}, 0
+    columns = triplets[1].astype(np.int64) - 1
+    diagonal = np.asarray(np.bincount(columns, weights=triplets[2] ** 2, minlength=total + 1), dtype=float)
+    blocks: dict[int, NDArray[np.float64]] = {}
+    start = 0
     for key in sorted(dims):
         blocks[key] = diagonal[start : start + dims[key]]
         start += dims[key]
@@ -448,7 +450,7 @@ def _damped(lin: gtsam.GaussianFactorGraph, damping: float, dims: dict[int, int]
 def _hold_lost_objects(linearize: _Linearizer, lin: gtsam.GaussianFactorGraph, delta: gtsam.VectorValues) -> None:
     """Zero the x, y step of every object no slice places, as :func:`solver.hold_lost_objects` does."""
     held = gtsam.VectorValues()
-    for j in np.flatnonzero(linearize.lost(lin)):
+    for j in np.flatnonzero(linearize.lost(lin)).tolist():
         key = linearize.keys.object(j)
         step = np.array(delta.at(key))
         step[:2] = 0.0
