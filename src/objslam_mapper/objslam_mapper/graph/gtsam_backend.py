@@ -521,6 +521,8 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
             decrease = current.cost - new.cost
             rho = decrease / max(predicted, 1e-300)
             values, current = new_values, new
+            # rho capped at 1, where the factor is 1/3 anyway: a decrease over a vanishing
+            # prediction (lost objects held) overflowed the cube.
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(rho, 1.0) - 1.0) ** 3)
             growth = 2.0
             if damping < 1e-3 * cfg.initial_lambda:

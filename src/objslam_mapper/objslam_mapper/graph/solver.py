@@ -329,6 +329,8 @@ def _minimize(
             decrease = lin.cost - new_lin.cost
             rho = decrease / max(fac.predicted_decrease, 1e-300)
             state, lin = new_state, new_lin
+            # rho capped at 1, where the factor is 1/3 anyway: a decrease over a vanishing
+            # prediction (lost objects held) overflowed the cube.
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(rho, 1.0) - 1.0) ** 3)
             growth = 2.0
             if damping < 1e-3 * cfg.initial_lambda:
