@@ -49,7 +49,7 @@ def test_a_lost_object_is_held_and_the_rest_of_the_step_is_unchanged(damping):
     lin = system.linearize(*state)
     free = factorize(system, lin, damping)
     held = dataclasses.replace(free, step_object=free.step_object.copy())
-    hold_lost_objects(system, lin, held, damping)
+    hold_lost_objects(lin, held, damping, lost_objects(system, lin))
     # Held by its prior alone, the Gauss-Newton step jumps the object toward the prior's
     # mean (the first pose, where the robot stood): that jump is what is dropped.
     offset = FAR_XY_M - system.prior_mean[0, :2]

@@ -447,11 +447,11 @@ def _damped(lin: gtsam.GaussianFactorGraph, damping: float, dims: dict[int, int]
     return damped
 
 
-def _hold_lost_objects(linearize: _Linearizer, lin: gtsam.GaussianFactorGraph, delta: gtsam.VectorValues) -> None:
-    """Zero the x, y step of every object no slice places, as :func:`solver.hold_lost_objects` does."""
+def _hold_lost_objects(keys: GtsamKeys, lost: NDArray[np.bool_], delta: gtsam.VectorValues) -> None:
+    """Zero the x, y step of every ``lost`` object, as :func:`solver.hold_lost_objects` does."""
     held = gtsam.VectorValues()
-    for j in np.flatnonzero(linearize.lost(lin)).tolist():
-        key = linearize.keys.object(j)
+    for j in np.flatnonzero(lost).tolist():
+        key = keys.object(j)
         step = np.array(delta.at(key))
         step[:2] = 0.0
         held.insert(key, step)
@@ -460,11 +460,11 @@ def _hold_lost_objects(linearize: _Linearizer, lin: gtsam.GaussianFactorGraph, d
 
 
 def _step(
-    linearize: _Linearizer, current: _Linear, bayes_tree: gtsam.GaussianBayesTree
+    keys: GtsamKeys, lost: NDArray[np.bool_], current: _Linear, bayes_tree: gtsam.GaussianBayesTree
 ) -> tuple[gtsam.VectorValues, float]:
-    """The step of an elimination, lost objects held, and the decrease the undamped linear model predicts for it."""
+    """The step of an elimination, ``lost`` objects held, and the decrease the undamped linear model predicts for it."""
     delta = bayes_tree.optimize()
-    _hold_lost_objects(linearize, current.graph, delta)
+    _hold_lost_objects(keys, lost, delta)
     return delta, current.cost - float(current.graph.error(delta))
 
 
@@ -489,11 +489,11 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
     iterations = 1
     restarted = np.zeros(linearize.keys.object_count, dtype=bool)
     while iterations < max_iterations:
-        lost = linearize.lost(current.graph) & ~restarted
-        if lost.any():
-            restarted |= lost
+        lost = linearize.lost(current.graph)
+        if (lost & ~restarted).any():
             iterations += 1
-            values, current = linearize.restart(values, current, lost)
+            values, current = linearize.restart(values, current, lost & ~restarted)
+            restarted |= lost
             continue
         system = current.graph if damping == 0.0 else _damped(current.graph, damping, linearize.dims)
         try:
@@ -503,7 +503,7 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
             if damping > cfg.max_lambda:
                 break
             continue
-        delta, predicted = _step(linearize, current, bayes_tree)
+        delta, predicted = _step(linearize.keys, lost, current, bayes_tree)
         tolerance = cfg.absolute_tolerance + cfg.relative_tolerance * current.cost
         if predicted <= tolerance:
             if damping <= cfg.initial_lambda:
@@ -512,7 +512,7 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
                 undamped = linearize.eliminate(current.graph)
             except RuntimeError:
                 undamped = None
-            if undamped is not None and _step(linearize, current, undamped)[1] <= tolerance:
+            if undamped is not None and _step(linearize.keys, lost, current, undamped)[1] <= tolerance:
                 return _Driven(values, current, undamped, iterations, True)
         new_values = values.retract(delta)
         new = linearize(new_values)

@@ -295,11 +295,11 @@ def _minimize(
     iterations = 1
     restarted = np.zeros(graph.n_objects, dtype=bool)
     while iterations < max_iterations:
-        lost = lost_objects(graph, lin) & ~restarted
-        if lost.any():
-            restarted |= lost
+        lost = lost_objects(graph, lin)
+        if (lost & ~restarted).any():
             iterations += 1
-            state, lin = _restart(graph, state, lin, lost)
+            state, lin = _restart(graph, state, lin, lost & ~restarted)
+            restarted |= lost
             continue
         try:
             fac = factorize(graph, lin, damping)
@@ -308,7 +308,7 @@ def _minimize(
             if damping > cfg.max_lambda:
                 break
             continue
-        hold_lost_objects(graph, lin, fac, damping)
+        hold_lost_objects(lin, fac, damping, lost)
         tolerance = cfg.absolute_tolerance + cfg.relative_tolerance * lin.cost
         if fac.predicted_decrease <= tolerance:
             if damping <= cfg.initial_lambda:
@@ -316,7 +316,7 @@ def _minimize(
             # Where slices sit at their caps' edge or objects are barely placed, the undamped
             # step fails again and again, and the damping never came back down to
             # initial_lambda: such solves ran to their budget at an optimum.
-            undamped = _undamped(graph, lin)
+            undamped = _undamped(graph, lin, lost)
             if undamped is not None and undamped.predicted_decrease <= tolerance:
                 return state, lin, undamped, iterations, True
         poses, objects, calib = state
@@ -344,13 +344,13 @@ def _minimize(
     return state, lin, None, iterations, False
 
 
-def _undamped(graph: AssociationSystem, lin: Linearization) -> Factorization | None:
-    """The undamped step at ``lin`` (lost objects held), None where the information is not positive definite."""
+def _undamped(graph: AssociationSystem, lin: Linearization, lost: NDArray[np.bool_]) -> Factorization | None:
+    """The undamped step at ``lin`` (``lost`` objects held), None where the information is not positive definite."""
     try:
         fac = factorize(graph, lin, 0.0)
     except np.linalg.LinAlgError:
         return None
-    hold_lost_objects(graph, lin, fac, 0.0)
+    hold_lost_objects(lin, fac, 0.0, lost)
     return fac
 
 
@@ -379,8 +379,9 @@ def _restart(
     return (poses, objects, calib), lin
 
 
-def hold_lost_objects(graph: AssociationSystem, lin: Linearization, fac: Factorization, damping: float) -> None:
-    """Zero the horizontal step of every object none of whose slices says where it is.
+def hold_lost_objects(lin: Linearization, fac: Factorization, damping: float, lost: NDArray[np.bool_]) -> None:
+    """Zero the horizontal step of every ``lost`` object (:func:`lost_objects` at ``lin``),
+    none of whose slices says where it is.
 
     An object whose slices are all beyond their outlier caps (or all on the free side of
     their bounds) is held in x, y by its class prior alone (``xy_stddev_m`` about the first
@@ -392,7 +393,6 @@ def hold_lost_objects(graph: AssociationSystem, lin: Linearization, fac: Factori
     step is the step of the system with them held; the cost left is the prior's pull,
     (distance / xy_stddev_m)^2 / 2, 0.125 nats at 50 m.
     """
-    lost = lost_objects(graph, lin)
     if not lost.any():
         return
     step = fac.step_object.reshape(-1, OBJECT_DIM)
