@@ -10,6 +10,8 @@ import pytest
 from objslam_common.catalog import load_catalog
 from objslam_common.geometry import between, wrap_angle
 from objslam_mapper.config import ClutterConfig, DetectionConfig, MapperConfig, MoveConfig, SamplerConfig
+from objslam_mapper.graph.conditional_evidence import object_evidence
+from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.graph.solver import solve
 from objslam_mapper.inference.association import CLUTTER, Association, enumerate_associations
 from objslam_mapper.inference.chain import MetropolisHastings
@@ -19,7 +21,7 @@ from objslam_mapper.inference.exact import ExactDistribution
 from objslam_mapper.inference.infer import infer_map
 from objslam_mapper.inference.screen import ProposalScreen
 from objslam_mapper.inference.start import clear_start_objects, initial_association, recall_start_clutter
-from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, AssociationTarget, TargetOptions, estimates
+from objslam_mapper.inference.target import NO_OBJECT_LOG_EVIDENCE, OBJECT, AssociationTarget, TargetOptions, estimates
 from objslam_mapper.inference.tracklets import Tracklet, tracklets_of_problem
 from objslam_mapper.model.slice_model import bounds_of_cuts
 from objslam_mapper.pipeline import build_map
@@ -579,6 +581,40 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
     green = next(g for g in old if chained.labels[g[1][0]] == "green")
     groups = target.graph_groups(moves[0])
     assert missed(groups, np.array([kept_estimate[g] for g in groups]))[green] > before[green]
+
+
+def test_the_screen_solves_a_group_from_every_group_that_holds_its_slices():
+    """A proposal that joins both looks at the red object near the start with the single
+    look at a red object 5 m away: that look holds more slices than either of the others, and
+    from its estimate the joined group converges there, the near slices beyond their caps,
+    hundreds of nats below its optimum at the near object. The screen takes the best of the
+    starts (each group that holds some of its slices, and its own slices' start)."""
+    far = SyntheticObject("red", (5.5, -2.8, 0.0), (0.30, 0.60))
+    problem = problem_of(simulate((RED_A, GREEN, far)))
+    chained = tracklets_of_problem(problem)
+    target = AssociationTarget(problem, chained.tracklets, TargetOptions(clutter=ClutterConfig(distractor_weight=0.0)))
+    red = [t for t, label in enumerate(chained.labels) if label == "red"]
+    far_look = min(red, key=lambda t: np.hypot(*(chained.tracklets[t].position_xy_m - np.array(far.location_m[:2]))))
+    near_looks = [t for t in red if t != far_look]
+    sizes = {t: len(chained.tracklets[t]) for t in red}
+    assert len(near_looks) == 2 and all(sizes[far_look] > sizes[t] for t in near_looks)
+    assert sizes[far_look] < sum(sizes[t] for t in near_looks)
+    state = Association.of(range(len(chained.tracklets)))  # every look its own object
+    screen = ProposalScreen(target)
+    poses, _, objects = screen._reference(state)
+    group = (OBJECT, tuple(sorted(red)))
+    members = target.measurements(group)
+    row = target.prior_row(group, members)
+    starts = [objects[state.assignment[t]] for t in red] + [initial_object(target.problem, members, poses)]
+    evidence = [
+        object_evidence(target.problem, poses, members, start, max_iterations=screen.iterations, prior=row)
+        for start in starts
+    ]
+    from_far = evidence[red.index(far_look)].log_evidence
+    log_evidence, estimate = screen._conditional(state, group)
+    assert log_evidence == pytest.approx(max(e.log_evidence for e in evidence), abs=1e-6)
+    assert log_evidence > from_far + 100.0
+    assert np.hypot(*(estimate[:2] - np.array(RED_A.location_m[:2]))) < 0.1
 
 
 def test_the_target_takes_upper_edges_as_measured_and_the_map_as_lower_bounds():
