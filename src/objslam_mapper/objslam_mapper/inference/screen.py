@@ -96,17 +96,24 @@ class ProposalScreen:
         # group that joins things metres apart has an optimum at each, and from the wrong one
         # its other slices lie beyond their caps (converged, and thousands of nats low). From
         # the majority's start alone, the screen judged a tracklet's move to clutter -2992 nats
-        # where the target gained 579, and a chain on `loop` stayed in that state.
+        # where the target gained 579, and a chain on `loop` stayed in that state. A start
+        # within the diameter of an optimum already found lies in its basin and is skipped:
+        # joining looks at one thing still costs one solve.
         starts = [objects[k] for k in np.argsort(-counts, kind="stable") if counts[k]]
         starts.append(initial_object(self.target.problem, members, poses))
         result = (-np.inf, np.zeros(5))
+        found: list[NDArray[np.float64]] = []
         for start in starts:
+            if any(np.hypot(*(start[:2] - optimum[:2])) < optimum[3] for optimum in found):
+                continue
             self.target.work.object_solves += 1
             started = time.perf_counter()
             evidence = object_evidence(
                 self.target.problem, poses, members, start, max_iterations=self.iterations, prior=row
             )
             self.target.work.screen_seconds += time.perf_counter() - started
+            if np.isfinite(evidence.log_evidence):
+                found.append(evidence.object_state)
             if evidence.log_evidence > result[0] or not np.isfinite(result[0]):
                 result = (evidence.log_evidence, evidence.object_state)
         return remember(self._group_evidence, key, result)
