@@ -5,7 +5,8 @@ Most proposals are hopeless (a few percent are accepted), so the chain screens t
 with the poses fixed at the current state's MAP the graph splits into one small problem
 per object or distractor (:mod:`objslam_mapper.graph.conditional_evidence`), and the difference
 of two associations one move apart is the conditional evidence of the few groups the
-move changes, plus the exact clutter terms, and the no-overlap and missed-detection
+move changes (each solved from every group that holds some of its slices and from its
+own slices' start, the best kept), plus the exact clutter terms, and the no-overlap and missed-detection
 terms of the changed groups at the fixed-pose objects. The screen leaves out how a move
 changes what the kept groups hide of each other (where two things stand at one place one
 hides the other, and taking the nearer away makes the other pay its misses). Counting that
