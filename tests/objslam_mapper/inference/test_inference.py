@@ -588,7 +588,8 @@ def test_the_screen_solves_a_group_from_every_group_that_holds_its_slices():
     look at a red object 5 m away: that look holds more slices than either of the others, and
     from its estimate the joined group converges there, the near slices beyond their caps,
     hundreds of nats below its optimum at the near object. The screen takes the best of the
-    starts (each group that holds some of its slices, and its own slices' start)."""
+    starts (each group that holds some of its slices; its own slices' start where none
+    converges)."""
     far = SyntheticObject("red", (5.5, -2.8, 0.0), (0.30, 0.60))
     problem = problem_of(simulate((RED_A, GREEN, far)))
     chained = tracklets_of_problem(problem)
@@ -612,7 +613,8 @@ def test_the_screen_solves_a_group_from_every_group_that_holds_its_slices():
     ]
     from_far = evidence[red.index(far_look)].log_evidence
     log_evidence, estimate = screen._conditional(state, group)
-    assert log_evidence == pytest.approx(max(e.log_evidence for e in evidence), abs=1e-6)
+    # The best of the starts, up to the solver's tolerance (starts in one basin stop apart).
+    assert log_evidence == pytest.approx(max(e.log_evidence for e in evidence), abs=1e-2)
     assert log_evidence > from_far + 100.0
     assert np.hypot(*(estimate[:2] - np.array(RED_A.location_m[:2]))) < 0.1
 

@@ -5,8 +5,8 @@ Most proposals are hopeless (a few percent are accepted), so the chain screens t
 with the poses fixed at the current state's MAP the graph splits into one small problem
 per object or distractor (:mod:`objslam_mapper.graph.conditional_evidence`), and the difference
 of two associations one move apart is the conditional evidence of the few groups the
-move changes (each solved from every group that holds some of its slices and from its
-own slices' start, the best kept), plus the exact clutter terms, and the no-overlap and missed-detection
+move changes (each solved from every group that holds some of its slices, the best
+kept), plus the exact clutter terms, and the no-overlap and missed-detection
 terms of the changed groups at the fixed-pose objects. The screen leaves out how a move
 changes what the kept groups hide of each other (where two things stand at one place one
 hides the other, and taking the nearer away makes the other pay its misses). Counting that
@@ -93,18 +93,22 @@ class ProposalScreen:
         row = self.target.prior_row(group, members)
         owned = owners[members]
         counts = np.bincount(owned[owned >= 0], minlength=len(objects))
-        # Every group that holds some of its slices, most first, and its own slices' start: a
-        # group that joins things metres apart has an optimum at each, and from the wrong one
-        # its other slices lie beyond their caps (converged, and thousands of nats low). From
-        # the majority's start alone, the screen judged a tracklet's move to clutter -2992 nats
-        # where the target gained 579, and a chain on `loop` stayed in that state. A start
-        # within the diameter of an optimum already found lies in its basin and is skipped:
-        # joining looks at one thing still costs one solve.
-        starts = [objects[k] for k in np.argsort(-counts, kind="stable") if counts[k]]
-        starts.append(initial_object(self.target.problem, members, poses))
+        # From every group that holds some of its slices, most first (its own slices' start
+        # where none converges): a group that joins things metres apart has an optimum at
+        # each, and from the wrong one its other slices lie beyond their caps (converged, and
+        # thousands of nats low). From the majority's start alone, the screen judged a
+        # tracklet's move to clutter -2992 nats where the target gained 579, and a chain on
+        # `loop` stayed in that state. A start within the diameter of an optimum already
+        # found lies in its basin and is skipped: joining looks at one thing costs one solve.
+        starts: list[NDArray[np.float64] | None] = [objects[k] for k in np.argsort(-counts, kind="stable") if counts[k]]
+        starts.append(None)
         result = (-np.inf, np.zeros(5))
         found: list[NDArray[np.float64]] = []
         for start in starts:
+            if start is None:
+                if found:
+                    break
+                start = initial_object(self.target.problem, members, poses)
             if any(np.hypot(*(start[:2] - optimum[:2])) < optimum[3] for optimum in found):
                 continue
             self.target.work.object_solves += 1
