@@ -490,10 +490,11 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
     restarted = np.zeros(linearize.keys.object_count, dtype=bool)
     while iterations < max_iterations:
         lost = linearize.lost(current.graph)
-        if (lost & ~restarted).any():
+        fresh = lost & ~restarted
+        if fresh.any():
             iterations += 1
-            values, current = linearize.restart(values, current, lost & ~restarted)
-            restarted |= lost
+            values, current = linearize.restart(values, current, fresh)
+            restarted |= fresh
             continue
         system = current.graph if damping == 0.0 else _damped(current.graph, damping, linearize.dims)
         try:

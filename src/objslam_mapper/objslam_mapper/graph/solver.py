@@ -296,10 +296,11 @@ def _minimize(
     restarted = np.zeros(graph.n_objects, dtype=bool)
     while iterations < max_iterations:
         lost = lost_objects(graph, lin)
-        if (lost & ~restarted).any():
+        fresh = lost & ~restarted
+        if fresh.any():
             iterations += 1
-            state, lin = _restart(graph, state, lin, lost & ~restarted)
-            restarted |= lost
+            state, lin = _restart(graph, state, lin, fresh)
+            restarted |= fresh
             continue
         try:
             fac = factorize(graph, lin, damping)

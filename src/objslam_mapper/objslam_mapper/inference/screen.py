@@ -34,7 +34,7 @@ import numpy as np
 from cachetools import FIFOCache, LRUCache
 from numpy.typing import NDArray
 
-from objslam_mapper.graph.conditional_evidence import object_evidence
+from objslam_mapper.graph.conditional_evidence import ObjectEvidence, object_evidence
 from objslam_mapper.graph.initialization import initial_object
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.caches import fifo, lru, remember
@@ -102,14 +102,14 @@ class ProposalScreen:
         # found lies in its basin and is skipped: joining looks at one thing costs one solve.
         starts: list[NDArray[np.float64] | None] = [objects[k] for k in np.argsort(-counts, kind="stable") if counts[k]]
         starts.append(None)
-        result = (-np.inf, np.zeros(5))
-        found: list[NDArray[np.float64]] = []
+        found: list[ObjectEvidence] = []  # the optima (finite evidence) reached so far
+        evidence: ObjectEvidence | None = None
         for start in starts:
             if start is None:
                 if found:
                     break
                 start = initial_object(self.target.problem, members, poses)
-            if any(np.hypot(*(start[:2] - optimum[:2])) < optimum[3] for optimum in found):
+            if any(np.hypot(*(start[:2] - f.object_state[:2])) < f.object_state[3] for f in found):
                 continue
             self.target.work.object_solves += 1
             started = time.perf_counter()
@@ -118,10 +118,11 @@ class ProposalScreen:
             )
             self.target.work.screen_seconds += time.perf_counter() - started
             if np.isfinite(evidence.log_evidence):
-                found.append(evidence.object_state)
-            if evidence.log_evidence > result[0] or not np.isfinite(result[0]):
-                result = (evidence.log_evidence, evidence.object_state)
-        return remember(self._group_evidence, key, result)
+                found.append(evidence)
+        # The last start always runs when nothing was found: evidence is set.
+        best = max(found, key=lambda f: f.log_evidence, default=evidence)
+        assert best is not None
+        return remember(self._group_evidence, key, (best.log_evidence, best.object_state))
 
     def _screen_no_overlap(self, state: Association, new: Association) -> float:
         """Change of the no-overlap term from ``state`` to ``new``, objects at the screen's
