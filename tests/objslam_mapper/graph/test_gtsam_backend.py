@@ -141,14 +141,29 @@ def test_a_bad_start_needs_damping_and_still_reaches_the_optimum(reference, monk
     bad = dataclasses.replace(ours, objects=objects, map_T_base=poses)
     dampings = []
 
-    def spy(linear, damping, dims):
+    def spy(linear, damping, diagonals):
         dampings.append(damping)
-        return _damped(linear, damping, dims)
+        return _damped(linear, damping, diagonals)
 
     monkeypatch.setattr(gtsam_backend, "_damped", spy)
+    counts = {"linearizations": 0, "diagonals": 0}
+    linearize, diagonals = _Linearizer.__call__, gtsam_backend._diagonals
+
+    def counted_linearize(self, values):
+        counts["linearizations"] += 1
+        return linearize(self, values)
+
+    def counted_diagonals(lin, dims):
+        counts["diagonals"] += 1
+        return diagonals(lin, dims)
+
+    monkeypatch.setattr(_Linearizer, "__call__", counted_linearize)
+    monkeypatch.setattr(gtsam_backend, "_diagonals", counted_diagonals)
     theirs = solve_gtsam(problem, groups, warm_start=bad, drive="python")
     assert dampings
     assert_same_solution(theirs, ours)
+    # The lost test and the damping share one diagonal per linearization.
+    assert 0 < counts["diagonals"] <= counts["linearizations"]
 
 
 def test_no_objects_and_an_object_seen_once(reference):
@@ -309,7 +324,7 @@ def test_damping_adds_the_scaled_diagonal(reference):
     for key in sorted(linearize.dims):
         order.push_back(key)
     hessian = linear.graph.augmentedHessian(order)[:-1, :-1]
-    damped = _damped(linear.graph, 0.3, linearize.dims).augmentedHessian(order)[:-1, :-1]
+    damped = _damped(linear.graph, 0.3, linearize.diagonals(linear)).augmentedHessian(order)[:-1, :-1]
     np.testing.assert_allclose(damped, hessian + 0.3 * np.diag(np.diag(hessian)), rtol=1e-12, atol=1e-9)
 
 

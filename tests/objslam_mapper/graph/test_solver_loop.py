@@ -81,7 +81,7 @@ def test_gtsam_finds_a_lost_object_again_as_the_fast_solver_does():
     graph, keys = build_gtsam_graph(problem, layout.groups, cap_scale=1.0)
     linearize = _Linearizer(graph, keys, problem, layout)
     start = keys.to_values(*state)
-    assert linearize.lost(linearize(start).graph).tolist() == [True] + [False] * (system.n_objects - 1)
+    assert linearize.lost(linearize(start)).tolist() == [True] + [False] * (system.n_objects - 1)
     driven = _drive_python(linearize, start, SolverConfig(), 50)
     assert driven.converged
     _, objects = keys.from_values(driven.values)

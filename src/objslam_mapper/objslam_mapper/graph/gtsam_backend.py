@@ -374,6 +374,9 @@ class _Linear:
 
     graph: gtsam.GaussianFactorGraph
     cost: float
+    # Per variable, its block of diag(Lambda), read once (:meth:`_Linearizer.diagonals`) where
+    # the lost test or the damping needs it: one sparse Jacobian per linearization, not per use.
+    diagonals: dict[int, NDArray[np.float64]] | None = None
 
 
 class _Linearizer:
@@ -400,9 +403,15 @@ class _Linearizer:
     def eliminate(self, graph: gtsam.GaussianFactorGraph) -> gtsam.GaussianBayesTree:
         return graph.eliminateMultifrontal(self.ordering)
 
-    def lost(self, lin: gtsam.GaussianFactorGraph) -> NDArray[np.bool_]:
+    def diagonals(self, current: _Linear) -> dict[int, NDArray[np.float64]]:
+        """``current``'s blocks of diag(Lambda) (:func:`_diagonals`), read on first use."""
+        if current.diagonals is None:
+            current.diagonals = _diagonals(current.graph, self.dims)
+        return current.diagonals
+
+    def lost(self, current: _Linear) -> NDArray[np.bool_]:
         """(K,) the objects no slice places, as :func:`solver.lost_objects` finds them."""
-        diagonals = _diagonals(lin, self.dims)
+        diagonals = self.diagonals(current)
         information = np.array([diagonals[k][:2] for k in self.keys.object_keys]).reshape(-1, 2)
         prior = self.prior_xy_information
         return np.all(information - prior <= LOST_INFORMATION_SHARE * prior, axis=1)
@@ -434,10 +443,13 @@ def _diagonals(lin: gtsam.GaussianFactorGraph, dims: dict[int, int]) -> dict[int
     return blocks
 
 
-def _damped(lin: gtsam.GaussianFactorGraph, damping: float, dims: dict[int, int]) -> gtsam.GaussianFactorGraph:
-    """``lin`` with Marquardt damping ``diag(Lambda) *= 1 + damping`` (as the fast solver damps)."""
+def _damped(
+    lin: gtsam.GaussianFactorGraph, damping: float, diagonals: dict[int, NDArray[np.float64]]
+) -> gtsam.GaussianFactorGraph:
+    """``lin`` with Marquardt damping ``diag(Lambda) *= 1 + damping`` (as the fast solver damps),
+    ``diagonals`` its blocks of diag(Lambda) (:func:`_diagonals`)."""
     damped = lin.clone()
-    for key, diag in _diagonals(lin, dims).items():
+    for key, diag in diagonals.items():
         dim = len(diag)
         damped.add(
             gtsam.JacobianFactor(
@@ -489,14 +501,14 @@ def _drive_python(linearize: _Linearizer, values: gtsam.Values, cfg: SolverConfi
     iterations = 1
     restarted = np.zeros(linearize.keys.object_count, dtype=bool)
     while iterations < max_iterations:
-        lost = linearize.lost(current.graph)
+        lost = linearize.lost(current)
         fresh = lost & ~restarted
         if fresh.any():
             iterations += 1
             values, current = linearize.restart(values, current, fresh)
             restarted |= fresh
             continue
-        system = current.graph if damping == 0.0 else _damped(current.graph, damping, linearize.dims)
+        system = current.graph if damping == 0.0 else _damped(current.graph, damping, linearize.diagonals(current))
         try:
             bayes_tree = linearize.eliminate(system)
         except RuntimeError:  # GTSAM's indeterminant linear system
