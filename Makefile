@@ -20,8 +20,12 @@ demo: setup
 lint: setup
 	@$(RUN) ruff check src tests scripts && ruff format --check src tests scripts && mypy
 
+# One pytest-xdist worker more than the cores (at most 4): many tests wait on subprocesses,
+# ROS discovery and bag playback, and a spare worker fills those waits.
+WORKERS = $(shell python3 -c 'import os; print(min(4, len(os.sched_getaffinity(0)) + 1))')
+
 test: lint
-	@$(RUN) python -m pytest -n auto --maxprocesses 4
+	@$(RUN) python -m pytest -n $(WORKERS)
 
 clean:
 	rm -rf build install log .venv
