@@ -12,6 +12,7 @@ from objslam_mapper.config import ClutterConfig, SliceNoiseConfig
 from objslam_mapper.graph.problem import gaussian_log_normalizer
 from objslam_mapper.inference.algorithm1 import (
     MapBuildError,
+    MapOptions,
     SampleObject,
     SampleSummary,
     build_from_samples,
@@ -53,7 +54,7 @@ def test_algorithm_1_bookkeeping():
         (SampleSummary(trajectory(0.4), (obj(A, 1.4, size=(0.4, 0.7)), obj(B, 5.4))), 1),
         (SampleSummary(trajectory(0.6), (obj(A_PLUS_B, 3.0),)), 1),
     ]
-    built = build_from_samples(samples, STAMPS, report_min_fraction=0.2, diagnostics={"note": 1})
+    built = build_from_samples(samples, STAMPS, MapOptions(report_min_fraction=0.2), diagnostics={"note": 1})
     assert len(built.objects) == 1 and len(built.rejected) == 2
     a = built.objects[0]
     assert a.existence_probability == pytest.approx(0.75)
@@ -78,7 +79,9 @@ def test_the_map_reports_error_covariances_and_the_existence_test_reads_the_marg
     precise = dataclasses.replace(obj(A, 1.0), error_cov=error)
     # A posterior of 0.5 m is spurious whatever its error covariance says.
     vague = dataclasses.replace(obj(B, 5.0, stddev_m=0.5), error_cov=error)
-    built = build_from_samples([(SampleSummary(trajectory(), (precise, vague)), 1)], STAMPS, report_min_fraction=0.2)
+    built = build_from_samples(
+        [(SampleSummary(trajectory(), (precise, vague)), 1)], STAMPS, MapOptions(report_min_fraction=0.2)
+    )
     assert len(built.objects) == 1 and len(built.rejected) == 1
     np.testing.assert_allclose(built.objects[0].position_covariance, error[:3, :3])
     np.testing.assert_allclose(built.objects[0].size_covariance, error[3:, 3:])
@@ -101,7 +104,7 @@ def test_identities_no_sample_yields_are_rejected_with_probability_zero():
     assert not built.objects
     (b,) = built.rejected
     assert b.existence_probability == 0.0 and b.position_m[0] == pytest.approx(5.0)
-    assert not build_from_samples(samples, STAMPS, report_min_fraction=1.01).rejected
+    assert not build_from_samples(samples, STAMPS, MapOptions(report_min_fraction=1.01)).rejected
 
 
 def test_headings_are_averaged_on_the_circle():
@@ -169,9 +172,9 @@ def _variants(extra_per_sample):
 
 def test_variants_of_one_object_that_differ_by_a_few_slices_are_one_identity():
     samples = _variants([range(100, 110), range(110, 115), (), range(120, 130)])
-    exact = build_from_samples(samples, STAMPS, identity_overlap=1.0)
+    exact = build_from_samples(samples, STAMPS, MapOptions(identity_overlap=1.0))
     assert not exact.objects  # four variants of 1/4 each: none above 1/2
-    grouped = build_from_samples(samples, STAMPS, identity_overlap=0.8)
+    grouped = build_from_samples(samples, STAMPS, MapOptions(identity_overlap=0.8))
     assert len(grouped.objects) == 1
     one = grouped.objects[0]
     assert one.existence_probability == pytest.approx(1.0)
@@ -185,7 +188,7 @@ def test_identities_differing_by_more_than_the_overlap_stay_apart():
         (SampleSummary(trajectory(), (obj(CORE, 1.0),)), 1),
         (SampleSummary(trajectory(), (obj(half, 1.0), obj(CORE - half, 1.5))), 1),
     ]
-    built = build_from_samples(samples, STAMPS, identity_overlap=0.8, report_min_fraction=0.0)
+    built = build_from_samples(samples, STAMPS, MapOptions(identity_overlap=0.8, report_min_fraction=0.0))
     assert sorted(o.measurement_count for o in built.objects + built.rejected) == [50, 50, 100]
     assert all(o.existence_probability == pytest.approx(0.5) for o in built.rejected)
 
@@ -197,11 +200,11 @@ def test_two_objects_of_one_sample_never_join_one_identity():
         (SampleSummary(trajectory(), (obj(CORE, 1.0),)), 3),
         (SampleSummary(trajectory(), (obj(a, 1.0), obj(b, 1.4))), 1),
     ]
-    built = build_from_samples(samples, STAMPS, identity_overlap=0.55, report_min_fraction=0.0)
+    built = build_from_samples(samples, STAMPS, MapOptions(identity_overlap=0.55, report_min_fraction=0.0))
     assert built.objects[0].existence_probability == pytest.approx(1.0)  # CORE and a (60 % of it) are one
     assert [o.measurement_count for o in built.rejected] == [40]
 
 
 def test_identity_overlap_must_exceed_one_half():
     with pytest.raises(MapBuildError, match="identity_overlap"):
-        build_from_samples(_variants([()]), STAMPS, identity_overlap=0.5)
+        build_from_samples(_variants([()]), STAMPS, MapOptions(identity_overlap=0.5))

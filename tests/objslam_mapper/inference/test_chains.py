@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from objslam_mapper.config import DetectionConfig, SamplerConfig
-from objslam_mapper.inference.algorithm1 import build_from_samples
+from objslam_mapper.inference.algorithm1 import MapOptions, build_from_samples
 from objslam_mapper.inference.association import CLUTTER
 from objslam_mapper.inference.chains import ChainSpec, InProcess, chain_specs, run_chain_task
 from objslam_mapper.inference.diagnostics import Work
@@ -84,14 +84,7 @@ def test_the_starts_are_dispersed(problem):
 
 
 def _algorithm_1(problem, samples):
-    return build_from_samples(
-        samples,
-        problem.stamps_ns,
-        spurious_location_stddev_m=CHAINS.spurious_location_stddev_m,
-        existence_threshold=CHAINS.existence_threshold,
-        report_min_fraction=CHAINS.report_min_fraction,
-        identity_overlap=CHAINS.identity_overlap,
-    )
+    return build_from_samples(samples, problem.stamps_ns, MapOptions.of(CHAINS))
 
 
 def _plain(built):

@@ -45,11 +45,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from objslam_mapper.config import SamplerConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.map_file import BuiltMap, MappedObject, TrajectoryPose
 
@@ -198,46 +199,49 @@ def _mean_calibration(weighted: Sequence[tuple[SampleSummary, float]]) -> dict[s
     return out
 
 
+class MapOptions(NamedTuple):
+    """How Algorithm 1 reads the samples (module docstring); :meth:`of` takes the sampler's settings."""
+
+    spurious_location_stddev_m: float = 0.30
+    existence_threshold: float = 0.5
+    # Identities that no sample yields are reported as rejected when at least this fraction
+    # of the samples hold them (spurious or not).
+    report_min_fraction: float = 0.05
+    identity_overlap: float = 1.0
+
+    @classmethod
+    def of(cls, config: SamplerConfig) -> MapOptions:
+        return cls(
+            spurious_location_stddev_m=config.spurious_location_stddev_m,
+            existence_threshold=config.existence_threshold,
+            report_min_fraction=config.report_min_fraction,
+            identity_overlap=config.identity_overlap,
+        )
+
+
 def build_from_samples(
     samples: Iterable[tuple[SampleSummary, float]],
     stamps_ns: Sequence[int] | NDArray[np.int64],
+    options: MapOptions | None = None,
     *,
-    spurious_location_stddev_m: float = 0.30,
-    existence_threshold: float = 0.5,
-    report_min_fraction: float = 0.05,
-    identity_overlap: float = 1.0,
     diagnostics: dict[str, Any] | None = None,
 ) -> BuiltMap:
-    """Paper Algorithm 1 over ``(summary, multiplicity)`` pairs (see the module docstring).
-
-    ``stamps_ns`` are the trajectory's stamps (one per pose). Identities that no sample
-    yields are reported as rejected when at least ``report_min_fraction`` of the samples
-    hold them (spurious or not).
-    """
-    built, _ = map_and_yields(
-        samples,
-        stamps_ns,
-        spurious_location_stddev_m=spurious_location_stddev_m,
-        existence_threshold=existence_threshold,
-        report_min_fraction=report_min_fraction,
-        identity_overlap=identity_overlap,
-        diagnostics=diagnostics,
-    )
+    """Paper Algorithm 1 over ``(summary, multiplicity)`` pairs (see the module docstring);
+    ``stamps_ns`` are the trajectory's stamps (one per pose)."""
+    built, _ = map_and_yields(samples, stamps_ns, options, diagnostics=diagnostics)
     return built
 
 
 def map_and_yields(
     samples: Iterable[tuple[SampleSummary, float]],
     stamps_ns: Sequence[int] | NDArray[np.int64],
+    options: MapOptions | None = None,
     *,
-    spurious_location_stddev_m: float = 0.30,
-    existence_threshold: float = 0.5,
-    report_min_fraction: float = 0.05,
-    identity_overlap: float = 1.0,
     diagnostics: dict[str, Any] | None = None,
 ) -> tuple[BuiltMap, list[frozenset[int]]]:
     """:func:`build_from_samples`, and for each sample (in the order given) the ids of the map's
     identities (objects and rejected) it yields: the indicators the chains' agreement is judged on."""
+    spurious_location_stddev_m, existence_threshold, report_min_fraction, identity_overlap = options or MapOptions()
     identities: dict[frozenset[int], _Identity] = {}
     trajectories: list[tuple[NDArray[np.float64], float]] = []
     calibrations: list[tuple[SampleSummary, float]] = []

@@ -42,7 +42,7 @@ from objslam_common.records import ImageSlices, OdometrySample
 from objslam_mapper.config import GraphConfig, SamplerConfig
 from objslam_mapper.errors import MapperError
 from objslam_mapper.graph.problem import GraphProblem, build_problem
-from objslam_mapper.inference.algorithm1 import build_from_samples
+from objslam_mapper.inference.algorithm1 import MapOptions, build_from_samples
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.diagnostics import PhaseProgress
 from objslam_mapper.inference.start import GreedyOptions, greedy_association, measurement_groups, no_association
@@ -87,9 +87,7 @@ def map_of_groups(
     return build_from_samples(
         [(summary, 1)],
         problem.stamps_ns,
-        spurious_location_stddev_m=config.spurious_location_stddev_m,
-        existence_threshold=config.existence_threshold,
-        report_min_fraction=config.report_min_fraction,
+        MapOptions.of(config),
         diagnostics={**(diagnostics or {}), "map_samples": 1},
     )
 

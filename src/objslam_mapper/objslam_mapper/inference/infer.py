@@ -20,7 +20,7 @@ from typing import Any
 
 from objslam_mapper.config import SamplerConfig
 from objslam_mapper.graph.problem import GraphProblem
-from objslam_mapper.inference.algorithm1 import build_from_samples, map_and_yields
+from objslam_mapper.inference.algorithm1 import MapOptions, build_from_samples, map_and_yields
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.chains import ChainOutcome, ChainRunner, ChainTask, InProcess, chain_specs, pooled_samples
 from objslam_mapper.inference.convergence import chain_convergence
@@ -104,10 +104,7 @@ def finish(inference: Inference, outcomes: Sequence[ChainOutcome]) -> BuiltMap:
     built, yields = map_and_yields(
         pooled_samples(outcomes, config.pooling),
         problem.stamps_ns,
-        spurious_location_stddev_m=config.spurious_location_stddev_m,
-        existence_threshold=config.existence_threshold,
-        report_min_fraction=config.report_min_fraction,
-        identity_overlap=config.identity_overlap,
+        MapOptions.of(config),
         diagnostics={**inference.inputs, **chains_diagnostics(outcomes)},
     )
     identities = [o.id for o in (*built.objects, *built.rejected)]
