@@ -726,3 +726,15 @@ def test_distractors_unlike_their_class_at_a_rate_of_their_own_in_the_target_and
             v for g, v in before.items() if g not in after
         )
         assert screen._screen_detection(truth, old, new) == pytest.approx(changed, abs=1e-9)
+
+
+def test_a_run_without_tracklets_maps_nothing_with_the_samplers_settings():
+    """No slice chains into a tracklet: no chain runs, and the empty map still records the
+    settings Algorithm 1 read (the sampler's, not the function's defaults)."""
+    unseen = SyntheticObject("red", (60.0, 60.0, 0.0), (0.3, 0.6))  # beyond the camera's range
+    problem = problem_of(simulate((unseen,)))
+    assert problem.measurement_count == 0
+    built = infer_map(problem, dataclasses.replace(QUICK, identity_overlap=0.9, existence_threshold=0.6))
+    assert not built.objects and not built.rejected
+    assert len(built.trajectory) == len(problem.stamps_ns)
+    assert built.diagnostics["identity_overlap"] == 0.9 and built.diagnostics["existence_threshold"] == 0.6

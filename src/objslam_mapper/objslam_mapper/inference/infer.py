@@ -95,7 +95,9 @@ def finish(inference: Inference, outcomes: Sequence[ChainOutcome]) -> BuiltMap:
         logger.warning("no tracklets (every detection isolated): the map holds no objects")
         target = AssociationTarget(problem, (), TargetOptions.of(config), watch.work)
         samples = [(target.summary(Association(())), 1)]
-        built = build_from_samples(samples, problem.stamps_ns, diagnostics={**inference.inputs, "map_samples": 1})
+        built = build_from_samples(
+            samples, problem.stamps_ns, MapOptions.of(config), diagnostics={**inference.inputs, "map_samples": 1}
+        )
         watch.report("mapping", 1, 1)
         return built
     watch.lap("sampling")
