@@ -241,7 +241,7 @@ def map_and_yields(
 ) -> tuple[BuiltMap, list[frozenset[int]]]:
     """:func:`build_from_samples`, and for each sample (in the order given) the ids of the map's
     identities (objects and rejected) it yields: the indicators the chains' agreement is judged on."""
-    spurious_location_stddev_m, existence_threshold, report_min_fraction, identity_overlap = options or MapOptions()
+    options = options or MapOptions()
     identities: dict[frozenset[int], _Identity] = {}
     trajectories: list[tuple[NDArray[np.float64], float]] = []
     calibrations: list[tuple[SampleSummary, float]] = []
@@ -256,7 +256,7 @@ def map_and_yields(
         calibrations.append((summary, float(count)))
         for obj in summary.objects:
             entry = identities.setdefault(obj.identity, _Identity(obj.label))
-            kept = not is_spurious(obj, spurious_location_stddev_m)
+            kept = not is_spurious(obj, options.spurious_location_stddev_m)
             entry.add(obj, float(count), kept)
             if kept:
                 yielded[-1].add(obj.identity)
@@ -265,14 +265,14 @@ def map_and_yields(
     if len({t.shape for t, _ in trajectories}) != 1 or trajectories[0][0].shape != (len(stamps_ns), 3):
         raise MapBuildError(f"sample trajectories must all be ({len(stamps_ns)}, 3)")
 
-    if not 0.5 < identity_overlap <= 1.0:
-        raise MapBuildError(f"identity_overlap must lie in (0.5, 1], got {identity_overlap}")
+    if not 0.5 < options.identity_overlap <= 1.0:
+        raise MapBuildError(f"identity_overlap must lie in (0.5, 1], got {options.identity_overlap}")
     rows = []
-    groups, group_of = _group_identities(identities, identity_overlap)
+    groups, group_of = _group_identities(identities, options.identity_overlap)
     for k, (identity, entry) in enumerate(groups):
         probability = entry.weight[True] / total
         seen = (entry.weight[True] + entry.weight[False]) / total
-        if probability > existence_threshold or seen >= report_min_fraction:
+        if probability > options.existence_threshold or seen >= options.report_min_fraction:
             rows.append((identity, entry, probability, k))
     rows.sort(key=lambda r: (-r[2], min(r[0])))
     map_id_of_group = {row[3]: number for number, row in enumerate(rows)}
@@ -290,7 +290,7 @@ def map_and_yields(
             size_covariance=tuple(tuple(float(v) for v in row) for row in cov[3:, 3:]),
             measurement_count=len(identity),
         )
-        (objects if probability > existence_threshold else rejected).append(mapped)
+        (objects if probability > options.existence_threshold else rejected).append(mapped)
 
     trajectory = _mean_trajectory(trajectories)
     poses = tuple(
@@ -301,9 +301,9 @@ def map_and_yields(
     info.update(
         {
             "identities": len(identities),
-            "identity_overlap": float(identity_overlap),
-            "spurious_location_stddev_m": float(spurious_location_stddev_m),
-            "existence_threshold": float(existence_threshold),
+            "identity_overlap": float(options.identity_overlap),
+            "spurious_location_stddev_m": float(options.spurious_location_stddev_m),
+            "existence_threshold": float(options.existence_threshold),
         }
     )
     calibration = _mean_calibration(calibrations)
