@@ -24,12 +24,15 @@ by the tracklet chaining are in no J.
 Each solve is warm-started from the chain's current state (a proposal differs from it by
 one move) and capped at ``proposal_max_iterations`` per phase of the outlier caps: a
 hopeless proposal (a merge of objects metres apart) then costs a few iterations and is
-rejected on the evidence at its last iterate, which is below its optimum. Values are
+rejected on the value at its last iterate. That value is not always below the optimum's:
+the graph's evidence nearly is (up to its log-determinant), but the detection term is
+evaluated there too and is not what the solve optimises (on ``clutter`` seed 14 a state
+stopped unconverged 93 nats above its converged value, and the chains kept it;
+docs/method.md). Values are
 cached per state, so the chain sees one fixed target whatever path led to a state. Another
 chain may reach the same state from elsewhere, and its solve find another local optimum of
 trajectory and objects (on ``clutter`` seed 13 one state was worth 51632 nats in one chain
-and 51318 solved from the odometry; docs/method.md): each value is a lower bound on the
-state's best evidence.
+and 51318 solved from the odometry; docs/method.md).
 
 The screen of proposals (:mod:`objslam_mapper.inference.screen`) and the start state
 (:mod:`objslam_mapper.inference.start`) are built on it.
