@@ -207,7 +207,8 @@ def test_proposal_probabilities_are_exact(with_sight_lines, with_things, moves, 
             log_qs = (p.log_q_forward, p.reverse_log_q())
             # math.isclose, not np.allclose: a third of this test's time went to numpy on 2-tuples.
             assert key not in reported or all(
-                math.isclose(seen, now, rel_tol=1e-5, abs_tol=1e-12) for seen, now in zip(reported[key], log_qs)
+                math.isclose(seen, now, rel_tol=1e-5, abs_tol=1e-12)
+                for seen, now in zip(reported[key], log_qs, strict=True)
             )
             reported[key] = log_qs
             frequency[key] += 1
