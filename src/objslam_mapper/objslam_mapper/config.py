@@ -649,6 +649,14 @@ class SamplerConfig:
     proposal_max_iterations: int = setting(
         15, "most solver linearizations per proposed association", minimum=1, expert=True
     )
+    settle_within_nats: float = setting(
+        50.0,
+        "a proposal whose capped solve stopped unconverged, valued less than this many nats "
+        "below the chain's state or above it, is solved on (the solver's own iteration budget) "
+        "before it is judged: an unconverged value can lie far above the optimum's; 0: never",
+        minimum=0.0,
+        expert=True,
+    )
     solution_cache_size: int = setting(
         256, "graph solutions kept for warm starts and map building", minimum=1, expert=True
     )

@@ -29,6 +29,8 @@ class Work:
 
     solves: int = 0  # graph solves of associations (the chain's and the start's)
     unconverged_solves: int = 0  # of those, the ones that stopped before converging
+    settled_solves: int = 0  # unconverged proposals solved on before the chain judged them
+    unconverged_settles: int = 0  # of those, the ones that still did not converge
     solve_seconds: float = 0.0
     screens: int = 0  # proposals screened
     screen_seconds: float = 0.0  # the screens' conditional object solves only
@@ -118,6 +120,7 @@ def _chain_run(outcome: ChainOutcome) -> dict[str, Any]:
         "kept_objects_mean": round(sum(kept_objects) / len(kept_objects), 3),
         "solves": work.solves,
         "unconverged_solves": work.unconverged_solves,
+        "settled_solves": work.settled_solves,
         "screens": work.screens,
         "trace": _thinned(result.history),
     }
@@ -139,7 +142,15 @@ def _thinned(history: Sequence[tuple[float, int]]) -> dict[str, Any]:
 
 def work_diagnostics(outcomes: Sequence[ChainOutcome]) -> dict[str, int]:
     """The costly calls of all chains."""
-    fields = ("solves", "unconverged_solves", "screens", "object_solves", "clutter_solves", "marginal_solves")
+    fields = (
+        "solves",
+        "unconverged_solves",
+        "settled_solves",
+        "screens",
+        "object_solves",
+        "clutter_solves",
+        "marginal_solves",
+    )
     return {name: sum(getattr(o.work, name) for o in outcomes) for name in fields}
 
 

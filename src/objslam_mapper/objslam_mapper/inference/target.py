@@ -28,7 +28,8 @@ rejected on the value at its last iterate. That value is not always below the op
 the graph's evidence nearly is (up to its log-determinant), but the detection term is
 evaluated there too and is not what the solve optimises (on ``clutter`` seed 14 a state
 stopped unconverged 93 nats above its converged value, and the chains kept it;
-docs/method.md). Values are
+docs/method.md), so a proposal the chain might take on such a value is solved on first
+(``settle_within_nats``). Values are
 cached per state, so the chain sees one fixed target whatever path led to a state. Another
 chain may reach the same state from elsewhere, and its solve find another local optimum of
 trajectory and objects (on ``clutter`` seed 13 one state was worth 51632 nats in one chain
@@ -92,6 +93,9 @@ class TargetOptions(NamedTuple):
     exclusion_floor_nats: float = -60.0
     detection: DetectionConfig = DetectionConfig(enabled=False)  # missed detections
     max_iterations: int | None = None  # per solve warm-started from the chain's state (None: solver.max_iterations)
+    # An unconverged proposal valued within this many nats below the chain's state (or above
+    # it) is solved on to convergence before the chain sees its value; 0: never.
+    settle_within_nats: float = 0.0
     cache_size: int = 256  # graph solutions kept
     sightings_cache_bytes: int = 256 * 2**20  # per-state sightings kept, in bytes (inference.caches)
 
@@ -103,6 +107,7 @@ class TargetOptions(NamedTuple):
             exclusion_floor_nats=config.exclusion_floor_nats,
             detection=config.detection,
             max_iterations=config.proposal_max_iterations,
+            settle_within_nats=config.settle_within_nats,
             cache_size=config.solution_cache_size,
             sightings_cache_bytes=config.sightings_cache_mb * 2**20,
         )
@@ -157,6 +162,7 @@ class AssociationTarget:
         self._members = [np.asarray(t.measurement_indices, dtype=np.int64) for t in self.tracklets]
         self._solutions: LRUCache[Association, GraphSolution] = lru(options.cache_size)
         self._anchor: GraphSolution | None = None
+        self._anchor_value: float | None = None  # the chain's state's value (settle_within_nats)
         self._thing_components: dict[tuple[int, ...], Component] = {}
         self._join_graph: list[set[int]] | None = None
         self._join_gains: dict[tuple[int, int], float] = {}  # per joined pair a < b: :meth:`_join_gain`
@@ -382,6 +388,28 @@ class AssociationTarget:
         if not self.graph_groups(state):
             return NO_OBJECT_LOG_EVIDENCE + self.clutter_log_likelihood(state)
         solution = self.solution(state)
+        value = self._state_value(state, solution)
+        # An unconverged solve's value can lie far above the optimum's (the detection term is
+        # evaluated at the last iterate, not optimised; module docstring): a proposal the
+        # chain might take on such a value is solved on first.
+        settle = self.options.settle_within_nats
+        if settle > 0.0 and not solution.converged and self._anchor_value is not None:
+            if np.isfinite(value) and value > self._anchor_value - settle:
+                solution = self._settle(state, solution)
+                value = self._state_value(state, solution)
+        return value
+
+    def _settle(self, state: Association, solution: GraphSolution) -> GraphSolution:
+        """``state`` solved on from ``solution`` with the solver's own iteration budget."""
+        start = time.perf_counter()
+        members, rows = self._graph(state)
+        result = solve_with_backend(self.problem, members, warm_start=solution, priors=rows)
+        self.work.solve_seconds += time.perf_counter() - start
+        self.work.settled_solves += 1
+        self.work.unconverged_settles += not result.converged
+        return remember(self._solutions, state, result)
+
+    def _state_value(self, state: Association, solution: GraphSolution) -> float:
         value = solution.log_evidence + self.clutter_log_likelihood(state)
         if self.options.exclusion and state.n_objects > 1 and np.isfinite(value):
             value += self.no_overlap_log_probability(state, solution)
@@ -435,6 +463,8 @@ class AssociationTarget:
     def move_to(self, state: Association) -> None:
         """The chain is now in ``state``: warm-start later solves from its solution."""
         self._anchor = self._solutions.get(state, self._anchor)
+        if self.options.settle_within_nats > 0.0:
+            self._anchor_value = self(state) if self.graph_groups(state) else None
 
     def summary(self, state: Association, *, error_covariances: bool = True) -> SampleSummary:
         """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects.
