@@ -464,7 +464,7 @@ class AssociationTarget:
         """The chain is now in ``state``: warm-start later solves from its solution."""
         self._anchor = self._solutions.get(state, self._anchor)
         if self.options.settle_within_nats > 0.0:
-            self._anchor_value = self(state) if self.graph_groups(state) else None
+            self._anchor_value = self(state)
 
     def summary(self, state: Association, *, error_covariances: bool = True) -> SampleSummary:
         """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects.
