@@ -116,7 +116,7 @@ def ray_cluster(ray_env):
 
 def _map(tmp_path: Path, env: dict[str, str], name: str, *args: str) -> dict:
     out = tmp_path / f"{name}.yaml"
-    cmd = objslam_cmd("map", str(BAGS / "small"), "--out", str(out), "--samples", "600", "--burn-in", "200", *args)
+    cmd = objslam_cmd("map", str(BAGS / "small"), "--out", str(out), "--samples", "300", "--burn-in", "100", *args)
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=400, env=env)
     assert done.returncode == 0, done.stderr
     content = yaml.safe_load(out.read_text())

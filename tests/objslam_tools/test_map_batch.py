@@ -10,7 +10,7 @@ import yaml
 
 from tests.conftest import BAGS, objslam_cmd
 
-CHAIN = ("--samples", "400", "--burn-in", "100")
+CHAIN = ("--samples", "200", "--burn-in", "50")
 
 
 def _run(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -34,7 +34,7 @@ def two_bags(tmp_path_factory):
 
 def test_two_bags_in_one_job_give_the_maps_of_objslam_map(two_bags, tmp_path):
     params = tmp_path / "params.yaml"
-    params.write_text(yaml.safe_dump({"mapper": {"ros__parameters": {"sampler": {"samples": 400, "burn_in": 100}}}}))
+    params.write_text(yaml.safe_dump({"mapper": {"ros__parameters": {"sampler": {"samples": 200, "burn_in": 50}}}}))
     out = tmp_path / "maps"
     batch = _run(
         "map-batch",
