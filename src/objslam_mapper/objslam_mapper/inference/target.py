@@ -94,7 +94,7 @@ class TargetOptions(NamedTuple):
     detection: DetectionConfig = DetectionConfig(enabled=False)  # missed detections
     max_iterations: int | None = None  # per solve warm-started from the chain's state (None: solver.max_iterations)
     # An unconverged proposal valued within this many nats below the chain's state (or above
-    # it) is solved on to convergence before the chain sees its value; 0: never.
+    # it) is solved on with the solver's own budget before the chain sees its value; 0: never.
     settle_within_nats: float = 0.0
     cache_size: int = 256  # graph solutions kept
     sightings_cache_bytes: int = 256 * 2**20  # per-state sightings kept, in bytes (inference.caches)
@@ -373,15 +373,20 @@ class AssociationTarget:
         cached = self._solutions.get(state)
         if cached is not None:
             return cached
-        start = time.perf_counter()
         max_iterations = None if self._anchor is None else self.options.max_iterations
-        members, rows = self._graph(state)
-        result = solve_with_backend(
-            self.problem, members, warm_start=self._anchor, max_iterations=max_iterations, priors=rows
-        )
-        self.work.solve_seconds += time.perf_counter() - start
+        result = self._solve(state, self._anchor, max_iterations)
         self.work.solves += 1
         self.work.unconverged_solves += not result.converged
+        return result
+
+    def _solve(self, state: Association, warm_start: GraphSolution | None, max_iterations: int | None) -> GraphSolution:
+        """``state``'s graph solved (timed) and kept as its solution."""
+        start = time.perf_counter()
+        members, rows = self._graph(state)
+        result = solve_with_backend(
+            self.problem, members, warm_start=warm_start, max_iterations=max_iterations, priors=rows
+        )
+        self.work.solve_seconds += time.perf_counter() - start
         return remember(self._solutions, state, result)
 
     def __call__(self, state: Association) -> float:
@@ -401,13 +406,10 @@ class AssociationTarget:
 
     def _settle(self, state: Association, solution: GraphSolution) -> GraphSolution:
         """``state`` solved on from ``solution`` with the solver's own iteration budget."""
-        start = time.perf_counter()
-        members, rows = self._graph(state)
-        result = solve_with_backend(self.problem, members, warm_start=solution, priors=rows)
-        self.work.solve_seconds += time.perf_counter() - start
+        result = self._solve(state, solution, None)
         self.work.settled_solves += 1
         self.work.unconverged_settles += not result.converged
-        return remember(self._solutions, state, result)
+        return result
 
     def _state_value(self, state: Association, solution: GraphSolution) -> float:
         value = solution.log_evidence + self.clutter_log_likelihood(state)
