@@ -154,6 +154,7 @@ def test_the_map_file_records_each_chain(built):
             "kept_objects_mean",
             "unconverged_solves",
             "settled_solves",
+            "unconverged_settles",
         ):
             assert key in run
         assert len(run["trace"]["log_target"]) == len(run["trace"]["objects"]) <= 300
@@ -247,6 +248,7 @@ def test_a_proposal_a_chain_might_take_on_an_unconverged_value_is_solved_on_firs
     settled_target, work = chain_at_here(1e6)
     assert settled_target(proposal) == pytest.approx(converged, abs=0.01)  # within the solver's tolerance
     assert settled_target.solution(proposal).converged and work.settled_solves == 1
+    assert work.unconverged_settles == 0
 
     # Only where the chain might take it: a proposal valued further below is judged as it stopped.
     margin = capped_target(here) - capped - 1.0

@@ -121,6 +121,7 @@ def _chain_run(outcome: ChainOutcome) -> dict[str, Any]:
         "solves": work.solves,
         "unconverged_solves": work.unconverged_solves,
         "settled_solves": work.settled_solves,
+        "unconverged_settles": work.unconverged_settles,
         "screens": work.screens,
         "trace": _thinned(result.history),
     }
@@ -146,6 +147,7 @@ def work_diagnostics(outcomes: Sequence[ChainOutcome]) -> dict[str, int]:
         "solves",
         "unconverged_solves",
         "settled_solves",
+        "unconverged_settles",
         "screens",
         "object_solves",
         "clutter_solves",
