@@ -40,7 +40,7 @@ def test_bench_soak_answers_every_build_of_a_looped_bag(ros_env):
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     data = json.loads(result.stdout)
-    assert data["answered"] == data["succeeded"] == 1
+    assert data["answered"] == data["succeeded"] == 1, data["rows"]
     assert all(r["objects"] > 0 and r["mapper_rss_mb"] > 50 for r in data["rows"])
 
 

@@ -135,7 +135,7 @@ def test_cached_detections_are_keyed_on_the_detector():
 
 
 def test_time_naive_solves_counts_what_it_timed():
-    from objslam_tools.bench.naive import time_naive_solves
+    from objslam_tools.bench._naive import time_naive_solves
     from objslam_tools.errors import ToolsError
     from tests.objslam_mapper.graph.test_gtsam_backend import make_problem
 

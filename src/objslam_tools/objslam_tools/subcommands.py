@@ -2,7 +2,9 @@
 
 Each module of such a package that exposes ``DESCRIPTION`` (one line),
 ``add_arguments(parser)`` and ``run(args) -> int`` is a subcommand, named after the module
-(``error_budget`` is ``error-budget``); adding one touches no other file.
+(``error_budget`` is ``error-budget``); adding one touches no other file. Modules whose name
+starts with ``_`` are helpers and are not imported here: every ``objslam`` verb builds the
+whole parser, so what a subcommand module imports at its top, every verb pays for.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ def discover(package: ModuleType) -> dict[str, ModuleType]:
     """The subcommand modules of ``package`` by name, sorted."""
     found = {}
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
         module = importlib.import_module(f"{package.__name__}.{info.name}")
         if hasattr(module, "run") and hasattr(module, "add_arguments"):
             found[info.name.replace("_", "-")] = module

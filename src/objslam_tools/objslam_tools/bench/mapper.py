@@ -5,7 +5,7 @@ the MH chain (proposals, screens, graph solves, clutter solves), marginals and A
 The detector runs first and is timed on its own line (``objslam bench detector`` measures it).
 
 The naive baseline is one fresh GTSAM Levenberg-Marquardt solve per MH step,
-with one CustomFactor per detection (:func:`objslam_tools.bench.naive.time_naive_solves`):
+with one CustomFactor per detection (:func:`objslam_tools.bench._naive.time_naive_solves`):
 a few such solves are timed on the chain's start association and proposals from it, and
 extrapolated to the whole chain.
 
@@ -160,7 +160,7 @@ def _naive(problem: Any, config: Any, max_seconds: float) -> dict[str, Any]:
     from objslam_mapper.inference.start import initial_association
     from objslam_mapper.inference.target import AssociationTarget, TargetOptions
     from objslam_mapper.inference.tracklets import tracklets_of_problem
-    from objslam_tools.bench.naive import time_naive_solves
+    from objslam_tools.bench._naive import time_naive_solves
 
     sampler_cfg = config.sampler
     chained = tracklets_of_problem(problem, sampler_cfg.tracklets)

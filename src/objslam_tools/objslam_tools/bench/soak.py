@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
                     "answered": bool(answer),
                     "success": bool(answer.get("success")),
                     "objects": int(answer.get("object_count", 0)),
+                    # why a build failed, or how it ended: a soak's row must say
+                    "message": str(answer.get("message", call.stderr.strip()[-300:])),
                     "build_s": round(time.monotonic() - t0, 2),
                     "mapper_rss_mb": round(_rss_mb(mapper.pid), 1),
                 }
@@ -92,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
                 r = rows[-1]
                 print(
                     f"lap {lap:3d}: answered {r['answered']!s:5s} success {r['success']!s:5s} "
-                    f"objects {r['objects']:3d}  build {r['build_s']:6.2f} s  mapper RSS {r['mapper_rss_mb']:7.1f} MB",
+                    f"objects {r['objects']:3d}  build {r['build_s']:6.2f} s  mapper RSS {r['mapper_rss_mb']:7.1f} MB"
+                    + ("" if r["success"] else f"  ({r['message']})"),
                     flush=True,
                 )
     finally:

@@ -5,10 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from objslam_common.catalog import load_catalog
-from objslam_mapper.map_file import read_map
 from objslam_tools.errors import UserError
-from objslam_tools.figures import write_figures
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,6 +30,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # Matplotlib and the scorer load in about three seconds: only for this verb.
+    from objslam_common.catalog import load_catalog
+    from objslam_mapper.map_file import read_map
+    from objslam_tools.figures import write_figures
+
     if not Path(args.map).is_file():
         raise UserError(f"map file not found: {args.map}")
     built = read_map(args.map)

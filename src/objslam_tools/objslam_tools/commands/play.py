@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import argparse
 import logging
+from typing import TYPE_CHECKING
 
-from objslam_tools.bag import COMPRESSED_IMAGE_TYPE, IMAGE_TYPE, Bag, RawMessage, open_bag
 from objslam_tools.errors import UserError
-from objslam_tools.player import PlayOptions, make_clock_publisher, play
-from objslam_tools.ros_util import import_message_type, ros_node
+
+if TYPE_CHECKING:
+    from objslam_tools.bag import Bag, RawMessage
 
 logger = logging.getLogger(__name__)
 
@@ -56,6 +57,11 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.duration import Duration
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile
+
+    # The bag reader's type store loads in a third of a second: only for this verb.
+    from objslam_tools.bag import open_bag
+    from objslam_tools.player import PlayOptions, make_clock_publisher, play
+    from objslam_tools.ros_util import import_message_type, ros_node
 
     if args.rate <= 0:
         raise UserError(f"--rate must be > 0, got {args.rate}")
@@ -117,6 +123,8 @@ def _require_image_topic(bag: Bag) -> None:
     Any name counts (like ``Bag.image_topic``, which ``objslam map`` uses), but several
     are fine here: playing needs no choice between them, only something to see.
     """
+    from objslam_tools.bag import COMPRESSED_IMAGE_TYPE, IMAGE_TYPE
+
     if not (bag.topics_of_type(IMAGE_TYPE) or bag.topics_of_type(COMPRESSED_IMAGE_TYPE)):
         raise UserError(
             f"bag {bag.path} has no camera image topic ({IMAGE_TYPE} or {COMPRESSED_IMAGE_TYPE}); "

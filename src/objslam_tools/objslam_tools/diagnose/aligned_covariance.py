@@ -23,7 +23,6 @@ import argparse
 import dataclasses
 
 import numpy as np
-from scipy.stats import chi2
 
 from objslam_common.catalog import load_catalog
 from objslam_common.config import default_config_dir, load_config
@@ -34,8 +33,6 @@ from objslam_mapper.graph.layout import layout_of
 from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM
 from objslam_mapper.graph.solver import solve
-from objslam_tools.evaluate import align_track, nees_summary
-from objslam_tools.oracle_map import oracle_problem
 from objslam_tools.trajectory import PoseTrack
 
 
@@ -72,6 +69,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # SciPy's stats, the scorer and the oracle map take about a second to load, and every
+    # objslam verb imports this module to build its parser (objslam_tools.subcommands).
+    from scipy.stats import chi2
+
+    from objslam_tools.evaluate import align_track, nees_summary
+    from objslam_tools.oracle_map import oracle_problem
 
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
     # One graph pose per image: the fit below is over the poses the map reports.

@@ -42,8 +42,6 @@ from objslam_mapper.graph.layout import layout_of
 from objslam_mapper.graph.linearize import AssociationSystem, cap_schedule
 from objslam_mapper.graph.problem import OBJECT_DIM, POSE_DIM, GraphProblem
 from objslam_mapper.graph.solver import GraphSolution, solve
-from objslam_tools.oracle_map import oracle_problem
-from objslam_tools.sim.motion import OdometryNoise
 from objslam_tools.trajectory import fit_se2, transform_poses
 
 Z = 2  # z_base in an object's (x, y, z_base, diameter, height)
@@ -170,19 +168,26 @@ DESCRIPTION = "an oracle map's object errors split into each measurement group's
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("bag", metavar="BAG", help="a simulated bag (with ground truth)")
     parser.add_argument("--params", metavar="FILE", default=None, help="mapper parameters (default config/mapper.yaml)")
-    default = OdometryNoise()
     parser.add_argument(
         "--calibration",
         nargs=3,
         type=float,
         metavar=("DS", "TS", "TB"),
-        default=(default.distance_scale, default.turn_scale, default.turn_bias_rad_per_m),
-        help="the odometry's true distance scale, turn scale and turn bias (rad/m)",
+        default=None,
+        help="the odometry's true distance scale, turn scale and turn bias (rad/m) (default: the simulator's)",
     )
 
 
 def run(args: argparse.Namespace) -> int:
+    # The oracle map loads the scorer and SciPy (about a second); every objslam verb imports
+    # this module to build its parser (objslam_tools.subcommands), so only when run.
+    from objslam_tools.oracle_map import oracle_problem
+    from objslam_tools.sim.motion import OdometryNoise
 
+    calibration = args.calibration
+    if calibration is None:
+        default = OdometryNoise()
+        calibration = (default.distance_scale, default.turn_scale, default.turn_bias_rad_per_m)
     config = load_config(MapperConfig, args.params or default_config_dir() / "mapper.yaml", "mapper")
     # One graph pose per image, for the truth's poses (as `objslam diagnose aligned-covariance`).
     keyframes = dataclasses.replace(config.solver.keyframes, enabled=False)
@@ -192,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
     truth_objects = {o.id: o for o in reference.ground_truth.objects}
     true_objects = np.array([np.r_[truth_objects[i].position_m, truth_objects[i].size_m] for i in ids])
     true_poses = reference.ground_truth_track.interpolate(problem.stamps_ns)
-    true_calib = np.array(args.calibration)[: problem.calibration_dim]
+    true_calib = np.array(calibration)[: problem.calibration_dim]
     budget = error_budget(problem, groups, solution, (true_poses, true_objects, true_calib))
 
     predicted = sum(budget.parts.values())

@@ -24,11 +24,14 @@ from objslam_common.config import default_config_dir, load_config
 from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import MapperConfig
 from objslam_mapper.model.slice_model import BEARING, COMPONENTS, censor, predict_reduced
-from objslam_tools.oracle_map import oracle_problem
 
 
 def object_biases(bag_path: str, config: MapperConfig) -> list[tuple[str, int, np.ndarray, np.ndarray]]:
     """(label, slice count, mean and standard deviation of the whitened errors (4,)) per real object of the bag."""
+    # The oracle map loads the scorer and SciPy (about a second); every objslam verb imports
+    # this module to build its parser (objslam_tools.subcommands), so only when run.
+    from objslam_tools.oracle_map import oracle_problem
+
     problem, reference, truth_ids, groups = oracle_problem(bag_path, config, load_catalog(config.catalog_file or None))
     truth = {o.id: o for o in reference.ground_truth.objects}
     out = []

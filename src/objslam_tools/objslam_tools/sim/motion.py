@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 from objslam_common.geometry import rotation, wrap_angle
 from objslam_tools.errors import ToolsError
@@ -36,6 +35,10 @@ class SmoothPath:
 
     @classmethod
     def through(cls, waypoints_xy: NDArray[np.float64], step_m: float = 0.01) -> SmoothPath:
+        # SciPy's interpolate pulls in its optimize (a quarter second) that `objslam sim
+        # --help`, which lists the scenarios of this package, should not pay.
+        from scipy.interpolate import CubicSpline
+
         pts = np.asarray(waypoints_xy, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
             raise PathError(f"need at least two (x, y) waypoints, got shape {pts.shape}")
