@@ -94,6 +94,37 @@ def test_greedy_gates_on_a_solve_that_stopped_short_of_convergence(monkeypatch):
     assert sorted(sorted(truth[t] for t in group) for group in state.groups) == [[0, 0], [1], [2]]
 
 
+def test_greedy_leaves_a_tracklet_it_cannot_place_out_of_every_later_solve(monkeypatch):
+    """A tracklet whose object the solve places only within metres joins nothing (with such a
+    covariance every object of its class is inside the gate) and is not carried in later solves."""
+    import dataclasses
+
+    import objslam_mapper.inference.start as start
+
+    solve = start.solve_with_backend
+    solved: list[list[set[int]]] = []
+
+    def vague(problem, groups, **kwargs):
+        solution = solve(problem, groups, **kwargs)
+        solved.append([set(map(int, g)) for g in groups])
+        wide = dataclasses.replace(solution.objects[-1], location_cov=np.diag([25.0, 25.0, 1.0]))
+        return dataclasses.replace(solution, objects=(*solution.objects[:-1], wide))
+
+    monkeypatch.setattr(start, "solve_with_backend", vague)
+    run, problem, tracklets = _scene()
+    state = greedy_association(problem, tracklets)
+    assert state.n_objects == len(tracklets)  # the RED_A tracklets too stay apart
+    assert solved  # the second RED_A tracklet had a candidate, so a solve
+    for k, groups in enumerate(solved):
+        new = groups[-1]
+        later = [g for call in solved[k + 1 :] for g in call]
+        assert all(not new & g for g in later)
+    # With a bound wider than the covariance, the same solves join RED_A's tracklets as before.
+    state = greedy_association(problem, tracklets, GreedyOptions(max_location_stddev_m=6.0))
+    truth = _true_objects(run, problem, tracklets)
+    assert [0, 0] in [sorted(truth[t] for t in group) for group in state.groups]
+
+
 def test_a_zero_gate_merges_nothing():
     _run, problem, tracklets = _scene()
     state = greedy_association(problem, tracklets, GreedyOptions(gate_probability=0.0))
