@@ -292,7 +292,8 @@ def greedy_association(
             with_covariances=True,
         )
         new = solution.objects[-1]
-        if not (np.isfinite(solution.log_evidence) and _located_within(new.location_cov, options.max_location_stddev_m)):
+        placed = _located_within(new.location_cov, options.max_location_stddev_m)
+        if not (np.isfinite(solution.log_evidence) and placed):
             logger.debug("greedy: the solve does not place tracklet %d; it stays an object of its own", t)
             unplaced.append([t])
             continue
