@@ -20,7 +20,9 @@ are the same code.
 
   provided ``d^2`` is within the chi-square gate (2 degrees of freedom, probability
   ``gate_probability``); otherwise it stays a new object. The cross-covariance of the two
-  estimates through the shared poses is neglected, as is usual for this baseline.
+  estimates through the shared poses is neglected, as is usual for this baseline. A
+  tracklet the solve cannot place (no optimum, or an xy stddev over
+  ``max_location_stddev_m``) stays a new object and is left out of the later solves.
   Decisions are never revisited and there is no clutter model.
 
 Ground-truth (oracle) association needs the simulator's truth, so it lives in
