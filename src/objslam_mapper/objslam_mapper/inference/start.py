@@ -291,9 +291,8 @@ def greedy_association(
             warm_start=warm,
             with_covariances=True,
         )
-        new = solution.objects[-1]
-        placed = _located_within(new.location_cov, options.max_location_stddev_m)
-        if not (np.isfinite(solution.log_evidence) and placed):
+        new = solution.objects[-1] if np.isfinite(solution.log_evidence) else None
+        if new is None or not _located_within(new.location_cov, options.max_location_stddev_m):
             logger.debug("greedy: the solve does not place tracklet %d; it stays an object of its own", t)
             unplaced.append([t])
             continue
