@@ -236,8 +236,7 @@ def test_a_proposal_a_chain_might_take_on_an_unconverged_value_is_solved_on_firs
         work = Work()
         options = TargetOptions.of(CHAINS)._replace(max_iterations=1, settle_within_nats=settle_within_nats)
         target = AssociationTarget(problem, chained.tracklets, options, work)
-        target(here)
-        target.move_to(here)
+        target.move_to(here, target(here))
         return target, work
 
     capped_target, work = chain_at_here(0.0)

@@ -546,7 +546,7 @@ def test_run_is_deterministic_for_a_seed_and_reports_progress():
                 500,
                 7,
                 progress=lambda d, t: seen_progress.append((d, t)),
-                on_move=moves.append,
+                on_move=lambda state, log_p: moves.append((state, log_p)),
             )
         )
     a, b = results
@@ -557,7 +557,8 @@ def test_run_is_deterministic_for_a_seed_and_reports_progress():
     assert a.target_evaluations == len(calls)
     accepted = sum(s.accepted for s in a.moves.values())
     assert len(moves) == 2 * (accepted + 1)
-    assert a.distinct_visited == len(set(moves[: accepted + 1]))
+    assert a.distinct_visited == len({state for state, _ in moves[: accepted + 1]})
+    assert all(log_p == scores[state] for state, log_p in moves)  # the value the chain holds
     assert set(a.acceptance_rates) == set(MOVE_KINDS)
     assert 0.0 < a.overall_acceptance_rate < 1.0
     assert a.diagnostics()["kept_samples"] == 2500

@@ -283,14 +283,14 @@ class MetropolisHastings:
         *,
         progress: Progress | None = None,
         keep_trace: bool = True,
-        on_move: Callable[[Association], None] | None = None,
+        on_move: Callable[[Association, float], None] | None = None,
     ) -> ChainResult:
         """Run ``samples`` steps; the states after the first ``burn_in`` steps are kept.
 
         ``progress(done, total)`` is called about 200 times, and at least every
-        PROGRESS_MAX_STEPS steps (where a caller can cancel by raising); ``on_move(state)`` with the
-        start state and after every accepted move (e.g. to warm-start the next solves
-        from the chain's current state).
+        PROGRESS_MAX_STEPS steps (where a caller can cancel by raising); ``on_move(state, log_target)``
+        with the start state and after every accepted move (e.g. to warm-start the next solves
+        from the chain's current state), the value the chain holds for it.
         """
         if not 0 <= burn_in < samples:
             raise SamplerError(f"need 0 <= burn_in < samples, got burn_in={burn_in}, samples={samples}")
@@ -302,7 +302,7 @@ class MetropolisHastings:
         if not math.isfinite(log_p):
             raise SamplerError(f"log target of the start state is {log_p}")
         if on_move is not None:
-            on_move(initial)
+            on_move(initial, log_p)
         best_state, best_log_p = initial, log_p
         stats = {kind: MoveStats() for kind in self.proposals.kind_weights}
         visited = {initial}
@@ -326,7 +326,7 @@ class MetropolisHastings:
                     view, log_p = proposal.view, self.target(proposal.view.state)
                     visited.add(view.state)
                     if on_move is not None:
-                        on_move(view.state)
+                        on_move(view.state, log_p)
                     if log_p > best_log_p:
                         best_state, best_log_p = view.state, log_p
             history.append((log_p, view.state.n_objects))

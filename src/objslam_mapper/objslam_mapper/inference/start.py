@@ -105,7 +105,7 @@ def _take_if_better(
         return state, value, False
     candidate_value = target(candidate)
     if candidate_value > value:
-        target.move_to(candidate)
+        target.move_to(candidate, candidate_value)
         return candidate, candidate_value, True
     return state, value, False
 
@@ -146,7 +146,7 @@ def clear_start_objects(
     target = screen.target
     moved: list[int] = []
     current = target(state)
-    target.move_to(state)  # the candidates differ from it by one object: warm starts
+    target.move_to(state, current)  # the candidates differ from it by one object: warm starts
     for group in sorted(state.groups, key=lambda g: (sum(len(target.tracklets[t]) for t in g), g)):
         candidate = Association.of([CLUTTER if t in group else a for t, a in enumerate(state.assignment)])
         if _only_like_their_class(target, candidate, group):
@@ -178,7 +178,7 @@ def recall_start_clutter(
     tracklets = target.tracklets
     moved: list[int] = []
     current = target(state)
-    target.move_to(state)
+    target.move_to(state, current)
     for t in sorted(state.clutter, key=lambda u: (-len(tracklets[u]), u)):
         groups = state.groups
         best = nearest_object(

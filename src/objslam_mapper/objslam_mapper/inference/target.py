@@ -462,11 +462,13 @@ class AssociationTarget:
         )
         return remember(self._sights, state, (map_T_base, seen))[1]
 
-    def move_to(self, state: Association) -> None:
-        """The chain is now in ``state``: warm-start later solves from its solution."""
+    def move_to(self, state: Association, value: float) -> None:
+        """The chain is now in ``state``, worth ``value`` (this target's value of it, as the
+        caller judged it): warm-start later solves from its solution and settle proposals
+        against that value. Evaluating the state again here would solve on a settled state
+        whose solve still stopped unconverged, and hold a value the chain does not."""
         self._anchor = self._solutions.get(state, self._anchor)
-        if self.options.settle_within_nats > 0.0:
-            self._anchor_value = self(state)
+        self._anchor_value = value
 
     def summary(self, state: Association, *, error_covariances: bool = True) -> SampleSummary:
         """MAP and marginals of ``state``'s objects (Algorithm 1, step 2a); distractors are no map objects.
