@@ -110,3 +110,20 @@ def test_unmatched_detections_are_split_into_from_a_distractor_and_unexplained()
     # ... detections from a distractor are not.
     assert not score_frame([sl("red", 0.5)], [], distractors, alone, EvalOptions())
     assert (alone.tallies["red"].from_distractor, alone.tallies["red"].unexplained) == (1, 0)
+
+
+def test_recall_is_binned_by_the_true_width_and_range_of_visible_objects():
+    r = math.radians
+    narrow = VisibleObject(0, "red", r(10.0), r(1.2), r(-8.0), r(2.0), 9.0, 0.0, True, 7.0)
+    wide = VisibleObject(1, "red", r(40.0), r(7.0), r(-8.0), r(2.0), 3.0, 0.0, True, 40.0)
+    evaluation = DetectorEvaluation(bag="by hand")
+    # Two images: the wide object found in both, the narrow one in the first only.
+    score_frame([detection(10.0, 1.2), detection(40.0, 7.0)], [narrow, wide], [], evaluation, EvalOptions())
+    score_frame([detection(40.0, 7.0)], [narrow, wide], [], evaluation, EvalOptions())
+    overall = evaluation.to_dict()["overall"]
+    by_width = [(row["from"], row["visible"], row["found"], row["recall"]) for row in overall["recall_by_width_deg"]]
+    assert by_width == [(1.0, 2, 1, 0.5), (6.0, 2, 2, 1.0)]
+    by_range = [(row["from"], row["to"], row["recall"]) for row in overall["recall_by_range_m"]]
+    assert by_range == [(2.0, 4.0, 1.0), (8.0, 10.0, 0.5)]
+    assert sum(overall["recall_by_width_deg"][k]["visible"] for k in range(2)) == overall["visible"]
+    assert "recall by true width (deg)" in format_report(evaluation)

@@ -13,7 +13,10 @@ explained, per class:
 - else it is *unexplained*.
 
 Errors (detection minus truth) are gathered for detections matched to visible objects:
-bearing, angular width (relative), lower and upper elevation.
+bearing, angular width (relative), lower and upper elevation. Recall is also binned by the
+visible objects' true angular width and range: the mapper's detection model
+(``sampler.detection``) needs the detector's detection rate as a function of both, and
+``--min-width-px 0`` shows it down to the narrowest objects.
 """
 
 from __future__ import annotations
@@ -55,6 +58,42 @@ TARGETS = {
 }
 
 
+# Bin edges of recall by angular width (deg) and by range (m): fine where detection starts.
+WIDTH_BIN_EDGES_DEG = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0, 10.0, math.inf)
+RANGE_BIN_EDGES_M = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, math.inf)
+
+
+@dataclass
+class RecallBins:
+    """Visible and found objects counted in bins of one quantity (edges: lower bounds, then +inf)."""
+
+    edges: tuple[float, ...]
+    visible: list[int] = field(default_factory=list)
+    found: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        bins = len(self.edges) - 1
+        self.visible = self.visible or [0] * bins
+        self.found = self.found or [0] * bins
+
+    def count(self, value: float, found: bool) -> None:
+        k = min(max(int(np.searchsorted(self.edges, value, side="right")) - 1, 0), len(self.visible) - 1)
+        self.visible[k] += 1
+        self.found[k] += int(found)
+
+    def add(self, other: RecallBins) -> None:
+        self.visible = [a + b for a, b in zip(self.visible, other.visible, strict=True)]
+        self.found = [a + b for a, b in zip(self.found, other.found, strict=True)]
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One row per bin with any visible object: ``[lo, hi)``, visible, found, recall."""
+        return [
+            {"from": lo, "to": hi, "visible": v, "found": f, "recall": f / v}
+            for lo, hi, v, f in zip(self.edges, self.edges[1:], self.visible, self.found, strict=False)
+            if v
+        ]
+
+
 @dataclass(frozen=True)
 class EvalOptions:
     min_width_px: float = 6.0  # narrower objects are not expected to be detected
@@ -75,12 +114,16 @@ class ClassTally:
     from_distractor: int = 0
     unexplained: int = 0
     errors: dict[str, list[float]] = field(default_factory=lambda: {name: [] for name in ERROR_NAMES})
+    by_width_deg: RecallBins = field(default_factory=lambda: RecallBins(WIDTH_BIN_EDGES_DEG))
+    by_range_m: RecallBins = field(default_factory=lambda: RecallBins(RANGE_BIN_EDGES_M))
 
     def add(self, other: ClassTally) -> None:
         for name in ("visible", "found", "detections", "by_object", "duplicates", "from_distractor", "unexplained"):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         for name in ERROR_NAMES:
             self.errors[name].extend(other.errors[name])
+        self.by_width_deg.add(other.by_width_deg)
+        self.by_range_m.add(other.by_range_m)
 
     def summary(self, frames: int) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -93,6 +136,8 @@ class ClassTally:
             "from_distractor": self.from_distractor,
             "unexplained": self.unexplained,
             "unexplained_per_100_frames": 100.0 * self.unexplained / frames if frames else None,
+            "recall_by_width_deg": self.by_width_deg.rows(),
+            "recall_by_range_m": self.by_range_m.rows(),
         }
         for name in ERROR_NAMES:
             values = np.asarray(self.errors[name], dtype=float)
@@ -244,6 +289,9 @@ def score_frame(
                 )
                 tally.errors["elevation_top_deg"].append(math.degrees(sl.elevation_top_rad - obj.elevation_top_rad))
         visible = [k for k, o in enumerate(candidates) if is_visible(o, options)]
+        for k in visible:
+            tally.by_width_deg.count(math.degrees(candidates[k].angular_width_rad), k in found)
+            tally.by_range_m.count(candidates[k].range_m, k in found)
         tally.visible += len(visible)
         tally.found += len(found)
         trouble |= len(found) < len(visible)
@@ -398,6 +446,13 @@ def format_report(evaluation: DetectorEvaluation) -> str:
             f"{s['duplicates']:5d} {s['from_distractor']:5d} {s['unexplained']:6d}  " + "  ".join(errors)
         )
     overall = data["overall"]
+    for title, key, unit in (("width", "recall_by_width_deg", "deg"), ("range", "recall_by_range_m", "m")):
+        lines += ["", f"recall by true {title} ({unit}), all classes:"]
+        lines += [
+            f"  {row['from']:5g} - {row['to']:<5g} visible {row['visible']:6d}  found {row['found']:6d}  "
+            f"recall {row['recall']:.3f}"
+            for row in overall[key]
+        ]
     lines += ["", "targets (overall):"]
     for name, (comparison, target) in TARGETS.items():
         value = overall[name]["median"] if isinstance(overall[name], dict) else overall[name]
