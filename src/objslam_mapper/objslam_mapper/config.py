@@ -382,7 +382,24 @@ class DetectionConfig:
         0.7, "probability that an object in view is detected in an image", minimum=1e-6, maximum=1.0 - 1e-6
     )
     min_angular_width_rad: float = setting(
-        0.035, "an object counts as in view only when its predicted width is at least this (rad)", minimum=0.0
+        0.035,
+        "a thing in view is detected at the full `probability` from this predicted width up (rad; twice the "
+        "detector's narrowest blob: its recall falls below it)",
+        minimum=0.0,
+    )
+    narrowest_width_rad: float = setting(
+        0.0175,
+        "the detector finds no thing narrower than this (rad; its narrowest blob): from here up to "
+        "`min_angular_width_rad` the detection probability rises linearly from 0 to `probability`, and a slice "
+        "of a thing predicted narrower pays `narrow_hit_probability` (docs/method.md)",
+        minimum=0.0,
+    )
+    narrow_hit_probability: float = setting(
+        0.01,
+        "what a slice of a thing predicted too narrow to be detected is worth, as a share of `probability` "
+        "(1: slices are never charged for their predicted width)",
+        minimum=1e-12,
+        maximum=1.0,
     )
     max_range_m: float = setting(
         10.0,

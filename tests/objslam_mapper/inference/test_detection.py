@@ -21,6 +21,7 @@ from objslam_mapper.inference.detection import (
     View,
     camera_view,
     detection_log_likelihood,
+    detection_rate,
     hidden,
     own_rate_log_likelihood,
     share,
@@ -179,7 +180,7 @@ def test_only_things_of_their_own_rate_leave_the_miss_count_and_only_when_the_pr
 
 
 def test_too_narrow_too_far_or_above_the_view_is_not_in_view():
-    narrow = [6.0, 0.0, 0.0, 0.15, 0.25]  # 0.025 rad wide, below the 0.035 rad gate
+    narrow = [8.0, 0.0, 0.0, 0.12, 0.25]  # 0.015 rad wide, below the detector's narrowest blob (0.0175)
     far = [11.0, 3.0, 0.0, 0.5, 0.3]  # wide enough but beyond 10 m
     high = [0.5, 0.0, 0.75, 0.15, 0.25]  # on a table, close: its lower edge above the view
     ok = [2.0, -1.0, 0.0, 0.3, 0.6]
@@ -199,6 +200,37 @@ def test_each_image_in_view_without_a_slice_costs_log_one_minus_pd():
         )
         == 0
     )
+
+
+def test_the_detection_rate_rises_linearly_from_the_narrowest_blob_to_the_full_width():
+    narrowest, full = CONFIG.narrowest_width_rad, CONFIG.min_angular_width_rad
+    widths = np.array([0.0, 0.9 * narrowest, 0.5 * (narrowest + full), full, 2 * full])
+    assert detection_rate(widths, CONFIG).tolist() == pytest.approx([0.01, 0.01, 0.5, 1.0, 1.0])
+    step = DetectionConfig(narrowest_width_rad=full, narrow_hit_probability=1.0)
+    assert detection_rate(widths, step).tolist() == [1.0] * 5
+
+
+def test_a_thing_too_narrow_to_be_detected_pays_for_its_slices_and_a_narrow_one_for_its_misses():
+    poses = np.column_stack([np.linspace(0.0, 2.0, 10), np.zeros(10), np.zeros(10)])
+    problem = _Problem(measurement_pose=[0, 4, 9])
+    groups = [np.array([0, 1, 2])]
+    # 0.12 m wide at about 8 m: 0.015 rad from every pose, below the narrowest blob.
+    far = np.array([[1.0, 8.0, 0.0, 0.12, 0.25]])
+    value = detection_log_likelihood(problem, poses, far, groups, CONFIG, View(0.4))
+    assert value == pytest.approx(3 * math.log(CONFIG.narrow_hit_probability))
+    # The same thing at half the range is 0.030 rad wide: its slices and its 7 misses are
+    # worth what its detection rate there makes them.
+    near = np.array([[1.0, 4.0, 0.0, 0.12, 0.25]])
+    seen = sight(problem, poses, near, CONFIG, View(0.4))
+    assert seen.in_view.all() and (seen.width < CONFIG.min_angular_width_rad).all()
+    rate = detection_rate(seen.width[:, 0], CONFIG)
+    hit = np.isin(np.arange(10), [0, 4, 9])
+    expected = np.log(rate[hit]).sum() + np.log1p(-CONFIG.probability * rate[~hit]).sum()
+    assert detection_log_likelihood(problem, poses, near, groups, CONFIG, View(0.4)) == pytest.approx(expected)
+    # With the step of the paper's model (no ramp, slices free) neither pays anything.
+    step = DetectionConfig(narrowest_width_rad=CONFIG.min_angular_width_rad, narrow_hit_probability=1.0)
+    assert detection_log_likelihood(problem, poses, far, groups, step, View(0.4)) == 0.0
+    assert detection_log_likelihood(problem, poses, near, groups, step, View(0.4)) == 0.0
 
 
 def test_the_view_top_is_read_off_the_slices_upper_edges():
@@ -267,7 +299,13 @@ def test_a_short_thing_does_not_hide_a_tall_one_that_stands_out_above_it():
 
 def _sightings_with_tables(things, on_table, poses=ROBOT):
     return sightings(
-        _Problem(), np.asarray(poses, dtype=float), np.asarray(things, dtype=float), [], CONFIG, VIEW, on_table=on_table
+        _Problem(),
+        np.asarray(poses, dtype=float),
+        np.asarray(things, dtype=float),
+        [np.zeros(0, np.int64)] * len(things),
+        CONFIG,
+        VIEW,
+        on_table=on_table,
     )
 
 
@@ -284,7 +322,13 @@ def test_a_table_hides_what_is_behind_it_but_not_the_object_on_it():
     assert tables.top[0, 0] == pytest.approx(np.arctan2(0.72 - MOUNT.height_m, 2.0 - CONFIG.table_diameter_m / 2))
     no_tables = DetectionConfig(table_diameter_m=0.0)
     seen = sightings(
-        _Problem(), np.array(ROBOT, float), np.array([on_table, behind]), [], no_tables, VIEW, on_table=[True, False]
+        _Problem(),
+        np.array(ROBOT, float),
+        np.array([on_table, behind]),
+        [np.zeros(0, np.int64)] * 2,
+        no_tables,
+        VIEW,
+        on_table=[True, False],
     )
     assert not seen.hidden.any()
 
@@ -303,7 +347,7 @@ def _rectangle(bearing, width, bottom, top, range_m):
     """A thing seen from one pose at the origin, standing ``range_m`` ahead, too thin to overlap another."""
     footprint = np.array([[range_m], [0.0], [0.0]])
     values = (np.array([[v]], dtype=float) for v in (bearing, width, bottom, top, range_m))
-    return Sight(*values, np.array([[True]]), footprint)
+    return Sight(*values, np.array([[True]]), footprint, np.array([[True]]))
 
 
 @settings(max_examples=200, deadline=None)

@@ -166,7 +166,8 @@ class ProposalScreen:
         lost = [k for k, g in enumerate(old_groups) if g not in new_set]
         kept = [k for k, g in enumerate(old_groups) if g in new_set]
         gained = [g for g in new_groups if g not in old_set]
-        shown = np.zeros((len(poses), 0), dtype=bool)
+        shown = in_frame_gained = np.zeros((len(poses), 0), dtype=bool)
+        width_gained = np.zeros((len(poses), 0))
         footprints = np.zeros((3, 0))
         gained_members = [target.measurements(g) for g in gained]
         gained_estimates = np.array([self._conditional(state, g)[1] for g in gained]).reshape(-1, 5)
@@ -181,16 +182,21 @@ class ProposalScreen:
                 target.problem, poses, gained_estimates, target.on_table(gained, gained_members), target.detection
             )
             shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), target.detection)
-            footprints = fresh.footprint
+            footprints, in_frame_gained, width_gained = fresh.footprint, fresh.in_frame, fresh.width
         recounted = [target.measurements(old_groups[k]) for k in recount]
         kin = np.concatenate([old_kin[recount], gained_kin])
-        hit, should = share(
-            hit_matrix(target.problem, len(poses), recounted + gained_members),
-            np.hstack([seen.visible[:, recount], shown]),
-            np.hstack([seen.sight.footprint[:, recount], footprints]),
-            kin,
+        own_hit = hit_matrix(target.problem, len(poses), recounted + gained_members)
+        own_should = np.hstack([seen.visible[:, recount], shown])
+        hit, should = share(own_hit, own_should, np.hstack([seen.sight.footprint[:, recount], footprints]), kin)
+        in_frame = np.hstack([seen.sight.in_frame[:, recount], in_frame_gained])
+        after = MissTerms.of(
+            should,
+            hit,
+            kin >= 0,
+            target.detection,
+            width_rad=np.hstack([seen.sight.width[:, recount], width_gained]),
+            charged=own_hit & in_frame & ~(own_should & ~should),
         )
-        after = MissTerms.of(should, hit, kin >= 0, target.detection)
         return (after - before).log_likelihood(target.detection)
 
     def __call__(self, state: Association, new: Association) -> float:
