@@ -40,7 +40,8 @@ seen", at the MAP of ``J`` (:func:`sightings`):
 Narrow things are detected less often. Measured (``objslam eval-detector --min-width-px 0``
 on ``office`` seeds 0 and 12, unoccluded objects in full view): recall 0 of 267 below 1 deg of
 predicted width, 0.25-0.30 from 1 to 1.5 deg, 0.98-0.995 from 1.5 to 2 deg, 1.00 above (by
-range only through the width: 1.00 for the wide objects seen beyond 10 m). So ``P_d`` is a
+range only through the width: 1.00 for the wide objects seen beyond 10 m; on pinhole and
+fisheye renders 0, 0.57-0.60 and 0.99 in the same bands). So ``P_d`` is a
 function of the predicted width ``w`` (:func:`detection_rate`): the full ``P_d`` from
 ``detection.min_angular_width_rad`` (2 deg) up, falling linearly to 0 at
 ``detection.narrowest_width_rad`` (1 deg). A miss at ``w`` costs ``log(1 - P_d(w))``, and a
