@@ -530,11 +530,13 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
     changed groups' misses (the kept groups' are the target's to count): a red object
     stands between the start and a green one that is in view from there (detection range
     10 m) but has slices only from within 3.5 m; taking the red object away is credited
-    with the red object's misses, not charged with those the green one then has."""
+    with the red object's misses, not charged with those the green one then has. The
+    widths where the detection rate ramps are set wide, so that the changed groups' slices
+    and misses at partial rates are in what the screen must get right."""
     blocker = SyntheticObject("red", (2.25, -0.65, 0.0), (0.3, 0.6))
     problem = problem_of(simulate((RED_A, GREEN, blocker)))
     chained = tracklets_of_problem(problem)
-    detection = DetectionConfig(max_range_m=10.0)
+    detection = DetectionConfig(max_range_m=10.0, narrowest_width_rad=0.03, min_angular_width_rad=0.12)
     clutter = ClutterConfig(distractor_weight=0.0)  # clutter leaves the graph: nothing hides in its place
     target = AssociationTarget(
         problem, chained.tracklets, TargetOptions(clutter=clutter, exclusion=False, detection=detection)
@@ -545,13 +547,20 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
     old = target.graph_groups(state)
     kept_estimate = dict(zip(old, estimates, strict=True))
 
-    def missed(groups, things):
+    def seen_as(groups, things):
         members = [target.measurements(g) for g in groups]
-        seen = sightings(problem, poses, things, members, detection, target.view)
-        return dict(zip(groups, seen.missed.sum(axis=0).tolist(), strict=True))
+        return sightings(problem, poses, things, members, detection, target.view)
 
-    before = missed(old, estimates)
-    log_miss = np.log1p(-detection.probability)
+    def missed(groups, things):
+        return dict(zip(groups, seen_as(groups, things).missed.sum(axis=0).tolist(), strict=True))
+
+    def terms(groups, things):
+        """Each group's detection term (none of them shares hits: each column on its own)."""
+        seen = seen_as(groups, things)
+        return {g: seen.terms(detection, [k]) for k, g in enumerate(groups)}
+
+    before = terms(old, estimates)
+    ramped = 0
     sampler = MetropolisHastings(
         chained.labels,
         target,
@@ -572,15 +581,17 @@ def test_the_screen_counts_the_misses_of_the_groups_a_move_changes():
         things = np.array(
             [kept_estimate[g] if g in kept_estimate else screen._conditional(state, g)[1] for g in groups]
         )
-        after = missed(groups, things)
-        changed = sum(n for g, n in after.items() if g not in before) - sum(
-            n for g, n in before.items() if g not in after
+        after = terms(groups, things)
+        changed = sum(t.log_likelihood(detection) for g, t in after.items() if g not in before) - sum(
+            t.log_likelihood(detection) for g, t in before.items() if g not in after
         )
-        assert screen._screen_detection(state, old, groups) == pytest.approx(changed * log_miss, abs=1e-9)
+        ramped += sum(t.width_log_likelihood != 0.0 for g, t in after.items() if g not in before)
+        assert screen._screen_detection(state, old, groups) == pytest.approx(changed, abs=1e-9)
+    assert ramped > 0
     # The blind spot: without the blocker the green object misses where it was hidden.
     green = next(g for g in old if chained.labels[g[1][0]] == "green")
     groups = target.graph_groups(moves[0])
-    assert missed(groups, np.array([kept_estimate[g] for g in groups]))[green] > before[green]
+    assert missed(groups, np.array([kept_estimate[g] for g in groups]))[green] > missed(old, estimates)[green]
 
 
 def test_the_screen_solves_a_group_from_every_group_that_holds_its_slices():
