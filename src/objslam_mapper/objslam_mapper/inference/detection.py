@@ -434,6 +434,26 @@ def share(
     return out_hit, out_should
 
 
+class Counts(NamedTuple):
+    """(N, K) what the detection term counts of K things (:class:`Sightings`)."""
+
+    hit: NDArray[np.bool_]
+    should: NDArray[np.bool_]
+    repeated: NDArray[np.bool_]
+    charged: NDArray[np.bool_]
+
+
+def count(own_hit: NDArray[np.bool_], own_should: NDArray[np.bool_], seen: Sight, kin: NDArray[np.int64]) -> Counts:
+    """The :class:`Counts` of the K things of ``seen`` from where each has a slice of its own
+    (``own_hit``) and is visible (``own_should``): fragments of one thing share them
+    (:func:`share`), and its own slices are charged where it is in frame and the image is not
+    a fragment's before it. The target's sightings and the screen's changed groups both
+    count through here, so that they cannot count differently."""
+    hit, should = share(own_hit, own_should, seen.footprint, kin)
+    repeated = own_should & ~should
+    return Counts(hit, should, repeated, own_hit & seen.in_frame & ~repeated)
+
+
 def sightings(
     problem: GraphProblem,
     map_T_base: NDArray[np.float64],
@@ -454,11 +474,8 @@ def sightings(
     tables = table_sight(problem, map_T_base, things, np.zeros(k, bool) if on_table is None else on_table, config)
     covered = hidden(seen, Sight.join([seen, tables]), config)
     kin = np.full(k, -1, dtype=np.int64) if kin is None else np.asarray(kin, dtype=np.int64)
-    own_should = seen.in_view & ~covered
-    own_hit = hit_matrix(problem, len(seen.in_view), groups)
-    hit, should = share(own_hit, own_should, seen.footprint, kin)
-    repeated = own_should & ~should
-    return Sightings(seen, tables, covered, hit, kin, repeated=repeated, charged=own_hit & seen.in_frame & ~repeated)
+    counts = count(hit_matrix(problem, len(seen.in_view), groups), seen.in_view & ~covered, seen, kin)
+    return Sightings(seen, tables, covered, counts.hit, kin, repeated=counts.repeated, charged=counts.charged)
 
 
 def miss_count_log_likelihood(n_miss: int, config: DetectionConfig) -> float:
@@ -493,22 +510,22 @@ class MissTerms(NamedTuple):
         detection rate (default: nowhere)."""
         missed = should & ~hit
         own = np.asarray(own_rate, dtype=bool) & (config.distractor_rate_prior > 0.0)
-        narrow_value = 0.0
+        full_missed, narrow_value = missed, 0.0
         if width_rad is not None:
             rate = detection_rate(width_rad, config)
             partial = rate < 1.0
+            full_missed = missed & ~partial
             narrow_misses = missed & partial
             narrow_misses[:, own] = False
             narrow_value = float(np.sum(np.log1p(-config.probability * rate[narrow_misses])))
             if charged is not None:
                 narrow_value += float(np.sum(np.log(rate[charged & partial])))
-            missed = missed & ~partial
         if not own.any():
-            return MissTerms(int(np.count_nonzero(missed)), 0.0, narrow_value)
+            return MissTerms(int(np.count_nonzero(full_missed)), 0.0, narrow_value)
         hits = np.count_nonzero(should[:, own] & hit[:, own], axis=0)
-        misses = np.count_nonzero((should & ~hit)[:, own], axis=0)
+        misses = np.count_nonzero(missed[:, own], axis=0)
         own_value = sum(own_rate_log_likelihood(int(h), int(m), config) for h, m in zip(hits, misses, strict=True))
-        return MissTerms(int(np.count_nonzero(missed[:, ~own])), own_value, narrow_value)
+        return MissTerms(int(np.count_nonzero(full_missed[:, ~own])), own_value, narrow_value)
 
     def __sub__(self, other: object) -> MissTerms:
         assert isinstance(other, MissTerms)

@@ -41,8 +41,8 @@ from objslam_mapper.inference.caches import fifo, lru, remember
 from objslam_mapper.inference.detection import (
     MissTerms,
     Sight,
+    count,
     hit_matrix,
-    share,
     sight,
     table_sight,
     visible,
@@ -166,9 +166,8 @@ class ProposalScreen:
         lost = [k for k, g in enumerate(old_groups) if g not in new_set]
         kept = [k for k, g in enumerate(old_groups) if g in new_set]
         gained = [g for g in new_groups if g not in old_set]
-        shown = in_frame_gained = np.zeros((len(poses), 0), dtype=bool)
-        width_gained = np.zeros((len(poses), 0))
-        footprints = np.zeros((3, 0))
+        shown = np.zeros((len(poses), 0), dtype=bool)
+        fresh = Sight.none_of(len(poses))
         gained_members = [target.measurements(g) for g in gained]
         gained_estimates = np.array([self._conditional(state, g)[1] for g in gained]).reshape(-1, 5)
         gained_kin = target.kin(gained)
@@ -182,20 +181,17 @@ class ProposalScreen:
                 target.problem, poses, gained_estimates, target.on_table(gained, gained_members), target.detection
             )
             shown = visible(fresh, Sight.join([seen.occluders(kept), fresh, fresh_tables]), target.detection)
-            footprints, in_frame_gained, width_gained = fresh.footprint, fresh.in_frame, fresh.width
         recounted = [target.measurements(old_groups[k]) for k in recount]
         kin = np.concatenate([old_kin[recount], gained_kin])
-        own_hit = hit_matrix(target.problem, len(poses), recounted + gained_members)
-        own_should = np.hstack([seen.visible[:, recount], shown])
-        hit, should = share(own_hit, own_should, np.hstack([seen.sight.footprint[:, recount], footprints]), kin)
-        in_frame = np.hstack([seen.sight.in_frame[:, recount], in_frame_gained])
+        counted = Sight.join([seen.sight.columns(recount), fresh])
+        counts = count(
+            hit_matrix(target.problem, len(poses), recounted + gained_members),
+            np.hstack([seen.visible[:, recount], shown]),
+            counted,
+            kin,
+        )
         after = MissTerms.of(
-            should,
-            hit,
-            kin >= 0,
-            target.detection,
-            width_rad=np.hstack([seen.sight.width[:, recount], width_gained]),
-            charged=own_hit & in_frame & ~(own_should & ~should),
+            counts.should, counts.hit, kin >= 0, target.detection, width_rad=counted.width, charged=counts.charged
         )
         return (after - before).log_likelihood(target.detection)
 
