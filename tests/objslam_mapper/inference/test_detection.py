@@ -37,11 +37,13 @@ MOUNT = CameraMount()
 
 
 class _Problem:
-    """The two fields the detection term reads of a GraphProblem."""
+    """The fields the detection term reads of a GraphProblem (slices of unknown bearing unless given)."""
 
-    def __init__(self, measurement_pose=()):
+    def __init__(self, measurement_pose=(), measurements=None):
         self.mount = MOUNT
         self.measurement_pose = np.asarray(measurement_pose, dtype=np.int64)
+        shape = (len(self.measurement_pose), 4)
+        self.measurements = np.full(shape, np.nan) if measurements is None else np.asarray(measurements, dtype=float)
 
 
 VIEW = View(0.4)
@@ -114,6 +116,35 @@ def test_fragments_of_one_distractor_share_their_hits_and_objects_do_not():
     shared_hit, counted = share(hit, should, footprint, np.array([3, 3]))
     assert shared_hit.tolist() == [[True, True], [True, True]]
     assert counted.tolist() == [[True, False], [True, False]]
+
+
+def test_a_fragment_seen_over_a_thing_is_a_hit_for_it_wherever_its_fit_lies():
+    """A poster seen as two tracklets, one fitted 3 m behind the other along the line of sight
+    (a short tracklet seen from afar is placed no better): their footprints are apart, yet in
+    each image the slice of one lies over the other's predicted bearing interval, so neither
+    misses the other's images. An image where the slice of its kind lies elsewhere stays a
+    miss, and an object or another kind gives no hits."""
+    poses = np.column_stack([np.linspace(0.0, 1.0, 10), np.full(10, -2.0), np.zeros(10)])
+    near, far = [2.0, 1.0, 0.5, 0.6, 0.2], [3.5, 4.0, 0.5, 0.6, 1.2]  # the near one too short to hide the other
+    things = np.array([near, far])
+    seen = sight(_Problem(), poses, things, CONFIG, EVERYWHERE_BUT_HIGH)
+    assert seen.in_view.all() and not hidden(seen, seen, CONFIG).any()
+    assert np.hypot(2.0 - 3.5, 1.0 - 4.0) > seen.footprint[2].sum()  # no overlap: share() joins nothing
+    pose = np.arange(10)
+    owner = np.repeat([0, 1], 5)  # the near fit's slices in images 0-4, the far one's in 5-9
+    measured = np.column_stack([seen.bearing[pose, owner], seen.width[pose, owner], np.zeros(10), np.zeros(10)])
+    groups = [np.arange(0, 5), np.arange(5, 10)]
+
+    def missed(kin, measurements=measured):
+        problem = _Problem(measurement_pose=pose, measurements=measurements)
+        return sightings(problem, poses, things, groups, CONFIG, EVERYWHERE_BUT_HIGH, kin=np.array(kin)).missed
+
+    assert missed([3, 3]).sum(axis=0).tolist() == [0, 0]
+    for apart in ([3, 4], [3, -1], [-1, -1]):
+        assert missed(apart).sum(axis=0).tolist() == [5, 5]
+    elsewhere = measured.copy()
+    elsewhere[9, 0] += 1.0  # image 9's slice of the far fragment, 1 rad off the near one
+    assert np.flatnonzero(missed([3, 3], elsewhere)[:, 0]).tolist() == [9]
 
 
 def test_fragments_of_one_distractor_are_missed_once_per_image():

@@ -42,7 +42,6 @@ from objslam_mapper.inference.detection import (
     MissTerms,
     Sight,
     count,
-    hit_matrix,
     sight,
     table_sight,
     visible,
@@ -185,7 +184,8 @@ class ProposalScreen:
         kin = np.concatenate([old_kin[recount], gained_kin])
         counted = Sight.join([seen.sight.columns(recount), fresh])
         counts = count(
-            hit_matrix(target.problem, len(poses), recounted + gained_members),
+            target.problem,
+            recounted + gained_members,
             np.hstack([seen.visible[:, recount], shown]),
             counted,
             kin,
