@@ -466,7 +466,7 @@ def fragment_hits(
         if len(columns) < 2:
             continue
         for j in columns:
-            slices = np.asarray(groups[j], dtype=np.int64)
+            slices = np.asarray(groups[int(j)], dtype=np.int64)
             pose = problem.measurement_pose[slices]
             others = columns[columns != j]
             off = np.abs(wrap_angle(measured[slices, BEARING][:, None] - seen.bearing[pose][:, others]))
