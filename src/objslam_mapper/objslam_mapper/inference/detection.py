@@ -452,6 +452,18 @@ class Counts(NamedTuple):
     charged: NDArray[np.bool_]
 
 
+def lies_over(
+    bearing_rad: NDArray[np.float64],
+    width_rad: NDArray[np.float64],
+    predicted_bearing_rad: NDArray[np.float64],
+    predicted_width_rad: NDArray[np.float64],
+) -> NDArray[np.bool_]:
+    """Whether slices (broadcast against the predictions) overlap a thing's predicted bearing
+    interval: their centres closer than half the two widths."""
+    off = np.abs(wrap_angle(bearing_rad - predicted_bearing_rad))
+    return off < 0.5 * (width_rad + predicted_width_rad)
+
+
 def fragment_hits(
     problem: GraphProblem, seen: Sight, groups: Sequence[NDArray[np.int64]], kin: NDArray[np.int64]
 ) -> NDArray[np.bool_]:
@@ -469,8 +481,12 @@ def fragment_hits(
             slices = np.asarray(groups[int(j)], dtype=np.int64)
             pose = problem.measurement_pose[slices]
             others = columns[columns != j]
-            off = np.abs(wrap_angle(measured[slices, BEARING][:, None] - seen.bearing[pose][:, others]))
-            near = off < 0.5 * (measured[slices, WIDTH][:, None] + seen.width[pose][:, others])
+            near = lies_over(
+                measured[slices, BEARING][:, None],
+                measured[slices, WIDTH][:, None],
+                seen.bearing[pose][:, others],
+                seen.width[pose][:, others],
+            )
             for column, hits in zip(others, near.T, strict=True):
                 over[pose[hits], column] = True
     return over

@@ -50,7 +50,6 @@ import numpy as np
 from cachetools import LRUCache
 from numpy.typing import NDArray
 
-from objslam_common.geometry import wrap_angle
 from objslam_mapper.config import ClutterConfig, DetectionConfig, SamplerConfig
 from objslam_mapper.graph.backends import solve_with_backend
 from objslam_mapper.graph.problem import GraphProblem
@@ -59,7 +58,7 @@ from objslam_mapper.inference.algorithm1 import SampleObject, SampleSummary
 from objslam_mapper.inference.association import Association
 from objslam_mapper.inference.caches import lru, lru_bytes, remember
 from objslam_mapper.inference.clutter import DISTRACTOR, ClutterModel, Component, DistractorFit
-from objslam_mapper.inference.detection import Sightings, camera_view, sightings
+from objslam_mapper.inference.detection import Sightings, camera_view, lies_over, sightings
 from objslam_mapper.inference.diagnostics import Work
 from objslam_mapper.inference.exclusion import no_overlap_log_probability
 from objslam_mapper.inference.tracklets import Tracklet
@@ -339,8 +338,9 @@ class AssociationTarget:
         kind = np.concatenate([m for m in self._members if self.problem.measurement_label[m[0]] == label])
         pose = self.problem.measurement_pose[kind]
         measured = np.asarray(self.problem.measurements)[kind]
-        off = np.abs(wrap_angle(measured[:, BEARING] - seen.sight.bearing[pose, 0]))
-        over = off < 0.5 * (measured[:, WIDTH] + seen.sight.width[pose, 0])
+        over = lies_over(
+            measured[:, BEARING], measured[:, WIDTH], seen.sight.bearing[pose, 0], seen.sight.width[pose, 0]
+        )
         hit = seen.hit.copy()
         hit[pose[over], 0] = True
         return dataclasses.replace(seen, hit=hit).terms(self.detection).log_likelihood(self.detection)
