@@ -487,8 +487,8 @@ def fragment_hits(
                 seen.bearing[pose][:, others],
                 seen.width[pose][:, others],
             )
-            for column, hits in zip(others, near.T, strict=True):
-                over[pose[hits], column] = True
+            at, of = np.nonzero(near)
+            over[pose[at], others[of]] = True
     return over
 
 
