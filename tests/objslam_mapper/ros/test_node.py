@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Callable
 
 import pytest
 import yaml
@@ -432,13 +433,15 @@ def driver(mapper, start_driver):
     return start_driver()
 
 
-def _build_until(driver, needle: str, timeout_s: float = 20.0, **request) -> dict:
-    """The response of a build whose message holds ``needle``: the messages published just
-    before may still be on their way to the node on a busy machine, so build again until then."""
+def _build_until(driver, until: str | Callable[[dict], bool], timeout_s: float = 20.0, **request) -> dict:
+    """The response of a build whose message holds ``until`` (or for which ``until(response)``
+    holds): the messages published just before may still be on their way to the node, or in
+    its queue, on a busy machine, so build again until then."""
+    done = until if callable(until) else (lambda response: until in response["message"])
     deadline = time.monotonic() + timeout_s
     while True:
         response = driver("build", **request)["response"]
-        if needle in response["message"] or time.monotonic() > deadline:
+        if done(response) or time.monotonic() > deadline:
             return response
         time.sleep(0.2)
 
@@ -448,14 +451,13 @@ def _run_and_take(driver) -> dict:
     the build before it has taken the last messages from its queue (on a busy machine the first
     build once held 35 of the 40 poses). Returns the response of the build that held them all."""
     assert driver("run") == {"odometry": 40, "slices": 40}
-    deadline = time.monotonic() + 30.0
-    while True:
-        response = driver("build", samples=50, burn_in=10)["response"]
-        whole = "from 40 images" in response["message"] and driver("received_map")["trajectory"]["poses"] == 40
-        if whole or time.monotonic() > deadline:
-            assert whole, f"the node did not take the whole run within 30 s: {response['message']}"
-            return response
-        time.sleep(0.2)
+
+    def whole(response: dict) -> bool:
+        return "from 40 images" in response["message"] and driver("received_map")["trajectory"]["poses"] == 40
+
+    response = _build_until(driver, whole, timeout_s=30.0, samples=50, burn_in=10)
+    assert whole(response), f"the node did not take the whole run within 30 s: {response['message']}"
+    return response
 
 
 def _cylinders(received: dict) -> list[dict]:
